@@ -1,0 +1,56 @@
+"""The `mesp` console: one sub-command per module in ``mesp_cell.commands``.
+
+A user's mistake (``InputError``) prints one line ``mesp: error: ...`` and exits 2; an
+interrupted command exits 130; nothing else is swallowed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+from collections.abc import Sequence
+
+from slicer.errors import InputError
+
+
+
+def command_modules() -> list[str]:
+    """Names of the sub-command modules: each has ``register(subparsers)`` setting ``func``."""
+    import mesp_cell.commands as package
+
+    return sorted(m.name for m in pkgutil.iter_modules(package.__path__) if not m.ispkg)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser, with every registered sub-command."""
+    parser = argparse.ArgumentParser(
+        prog="mesp",
+        description="MESP Cell: multi-axis embedded silicone printing with a UR5e.",
+    )
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+    for name in command_modules():
+        module = importlib.import_module(f"mesp_cell.commands.{name}")
+        module.register(sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the `mesp` console script."""
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        code = args.func(args)
+    except InputError as exc:
+        print(f"mesp: error: {exc.one_line()}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("mesp: interrupted", file=sys.stderr)
+        return 130
+    return int(code or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,188 @@
+"""The print job's configuration: typed, validated, loaded from TOML over one defaults file."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field, replace
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+from slicer.configtools import build, merge, read_toml
+from slicer.errors import InputError
+
+UNIT_SCALE_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+
+_SELECTOR = re.compile(
+    r"^(?P<kind>bottom|top)(?::(?P<cone>[-+0-9.eE]+))?$"
+    r"|^normal:(?P<n>[-+0-9.eE]+,[-+0-9.eE]+,[-+0-9.eE]+)(?::(?P<ncone>[-+0-9.eE]+))?$"
+)
+
+
+@dataclass(frozen=True)
+class CriticalSelector:
+    """Boundary faces whose outward normal lies within ``cone_deg`` of ``direction``.
+
+    Attributes:
+        direction: (3,) float, unit axis of the cone.
+        cone_deg: float, deg, half-angle of the cone.
+        text: the selector as the user wrote it.
+    """
+
+    direction: tuple[float, float, float]
+    cone_deg: float
+    text: str
+
+    @staticmethod
+    def parse(text: str) -> CriticalSelector:
+        """Parse ``bottom[:DEG]``, ``top[:DEG]`` or ``normal:X,Y,Z[:DEG]`` (default 45 deg)."""
+        match = _SELECTOR.match(text.strip())
+        fix = "write bottom[:DEG], top[:DEG] or normal:X,Y,Z[:DEG], e.g. top:30"
+        if match is None:
+            raise InputError(f"critical selector '{text}' is not understood", fix)
+        try:
+            if match["kind"]:
+                axis = (0.0, 0.0, -1.0) if match["kind"] == "bottom" else (0.0, 0.0, 1.0)
+                cone = float(match["cone"]) if match["cone"] else 45.0
+            else:
+                vec = np.array([float(v) for v in match["n"].split(",")])
+                norm = float(np.linalg.norm(vec))
+                if norm == 0.0:
+                    raise InputError(f"critical selector '{text}' has a zero normal", fix)
+                axis = tuple(float(v) for v in vec / norm)  # type: ignore[assignment]
+                cone = float(match["ncone"]) if match["ncone"] else 45.0
+        except ValueError as exc:
+            raise InputError(f"critical selector '{text}' has a bad number", fix) from exc
+        if not 0.0 < cone < 90.0:
+            raise InputError(f"critical selector '{text}': cone {cone} deg", "use 0 < DEG < 90")
+        return CriticalSelector(direction=axis, cone_deg=cone, text=text.strip())
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    units: Literal["mm", "cm", "m", "in"] = "mm"
+    max_size_mm: float = 2000.0
+    min_size_mm: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not 0 < self.min_size_mm < self.max_size_mm:
+            raise ValueError("need 0 < min_size_mm < max_size_mm")
+
+    @property
+    def scale_mm(self) -> float:
+        """Millimetres per model-file unit."""
+        return UNIT_SCALE_MM[self.units]
+
+
+@dataclass(frozen=True)
+class MeshConfig:
+    edge_length_mm: float = 1.2
+    epsilon: float = 2e-3
+    stop_energy: float = 10.0
+    optimize_iterations: int = 80
+    coarsen: bool = True
+
+    def __post_init__(self) -> None:
+        if not 0.05 <= self.edge_length_mm <= 100.0:
+            raise ValueError(f"edge_length_mm = {self.edge_length_mm}, use 0.05 to 100")
+        if not 0 < self.epsilon < 0.1:
+            raise ValueError(f"epsilon = {self.epsilon}, use 0 < epsilon < 0.1")
+        if self.stop_energy <= 3.0:
+            raise ValueError("stop_energy must exceed 3 (the energy of a regular tet)")
+        if self.optimize_iterations < 0:
+            raise ValueError("optimize_iterations must be >= 0")
+
+
+@dataclass(frozen=True)
+class SlicingConfig:
+    layer_height_mm: float = 0.6
+    critical: tuple[str, ...] = ("bottom:45",)
+    planar: bool = False
+    max_iterations: int = 30
+    convergence: float = 1e-2
+    smoothness_weight: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not 0.01 <= self.layer_height_mm <= 20.0:
+            raise ValueError(f"layer_height_mm = {self.layer_height_mm}, use 0.01 to 20")
+        for text in self.critical:
+            CriticalSelector.parse(text)
+        if self.max_iterations < 0:
+            raise ValueError("max_iterations must be >= 0")
+        if not 0 < self.convergence < 1:
+            raise ValueError("convergence must be in (0, 1)")
+        if self.smoothness_weight <= 0:
+            raise ValueError("smoothness_weight must be > 0")
+
+    @property
+    def selectors(self) -> tuple[CriticalSelector, ...]:
+        """The parsed critical-region selectors."""
+        return tuple(CriticalSelector.parse(t) for t in self.critical)
+
+
+@dataclass(frozen=True)
+class ToolpathConfig:
+    first_pattern: Literal["contour", "stripe"] = "contour"
+    waypoint_spacing: float = 0.333
+    deformation_iterations: int = 6
+    volume_tolerance: float = 0.005
+    min_path_length_mm: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not 0.02 <= self.waypoint_spacing <= 2.0:
+            raise ValueError("waypoint_spacing must be in [0.02, 2] (fraction of W)")
+        if self.deformation_iterations < 0:
+            raise ValueError("deformation_iterations must be >= 0")
+        if not 0 < self.volume_tolerance < 0.2:
+            raise ValueError("volume_tolerance must be in (0, 0.2)")
+        if self.min_path_length_mm < 0:
+            raise ValueError("min_path_length_mm must be >= 0")
+
+
+@dataclass(frozen=True)
+class ExtrusionConfig:
+    profile: str = "ecoflex-0030"
+
+
+@dataclass(frozen=True)
+class JobConfig:
+    """A whole print job's settings (see ``slicer/defaults.toml`` for every key)."""
+
+    model: ModelConfig = field(default_factory=ModelConfig)
+    mesh: MeshConfig = field(default_factory=MeshConfig)
+    slicing: SlicingConfig = field(default_factory=SlicingConfig)
+    toolpath: ToolpathConfig = field(default_factory=ToolpathConfig)
+    extrusion: ExtrusionConfig = field(default_factory=ExtrusionConfig)
+
+    def with_overrides(self, **sections: dict[str, Any]) -> JobConfig:
+        """A new config with some keys of some sections replaced, validated again."""
+        data = {name: vars_of(getattr(self, name)) for name in sections}
+        out = self
+        for name, changes in sections.items():
+            merged = {**data[name], **changes}
+            section_cls = type(getattr(self, name))
+            out = replace(out, **{name: build(section_cls, merged, name)})
+        return out
+
+
+def vars_of(section: Any) -> dict[str, Any]:
+    """A config section's fields as a dict."""
+    return {k: getattr(section, k) for k in section.__dataclass_fields__}
+
+
+def default_data() -> dict[str, Any]:
+    """The parsed defaults file."""
+    text = resources.files("slicer").joinpath("defaults.toml").read_text()
+    import tomllib
+
+    return tomllib.loads(text)
+
+
+def load_job(path: Path | None = None) -> JobConfig:
+    """The defaults, overridden by the job file at ``path`` if given."""
+    data = default_data()
+    if path is not None:
+        data = merge(data, read_toml(path))
+    return build(JobConfig, data, "job")

@@ -1,0 +1,256 @@
+"""The immutable pipeline stages and their files (design.md, "Artifacts").
+
+Each stage is a frozen dataclass of read-only numpy arrays that saves to and loads from
+its ``.npz`` file in a job directory. Nothing mutates a stage in place: a later stage is a
+new value computed from earlier ones.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import ClassVar, Self
+
+import numpy as np
+
+from slicer.artifacts import Schema, load_npz, save_npz
+from slicer.errors import InputError
+
+
+def _frozen(arr: np.ndarray, dtype: type | np.dtype) -> np.ndarray:
+    out = np.ascontiguousarray(arr, dtype=dtype)
+    if out is arr or out.base is not None:
+        out = out.copy()
+    out.setflags(write=False)
+    return out
+
+
+class _Stage:
+    """Shared save/load for stage dataclasses; subclasses declare FILE, SCHEMA and DTYPES."""
+
+    FILE: ClassVar[str]
+    SCHEMA: ClassVar[Schema]
+    DTYPES: ClassVar[dict[str, type]]
+
+    def _freeze(self) -> None:
+        for f in fields(self):  # type: ignore[arg-type]
+            value = getattr(self, f.name)
+            if f.name in self.DTYPES:
+                object.__setattr__(self, f.name, _frozen(value, self.DTYPES[f.name]))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The stage's arrays by their file names."""
+        return {name: getattr(self, name) for name in self.DTYPES}
+
+    def save(self, job_dir: Path) -> Path:
+        """Write the stage file into ``job_dir`` atomically; returns its path."""
+        path = Path(job_dir) / self.FILE
+        save_npz(path, self.arrays())
+        return path
+
+    @classmethod
+    def load(cls, job_dir: Path) -> Self:
+        """Read the stage file from ``job_dir``; a missing or malformed file is an InputError."""
+        path = Path(job_dir) / cls.FILE
+        arrays = load_npz(path, cls.SCHEMA)
+        try:
+            return cls(**{name: arrays[name] for name in cls.DTYPES})
+        except ValueError as exc:
+            raise InputError(f"{path} is inconsistent ({exc})", "re-run the stage") from exc
+
+
+@dataclass(frozen=True, eq=False)
+class TetMesh(_Stage):
+    """A tetrahedral mesh of the solid.
+
+    Attributes:
+        vertices: (V, 3) float64, mm.
+        tets: (T, 4) int32, vertex indices, positively oriented (det of edges > 0).
+    """
+
+    vertices: np.ndarray
+    tets: np.ndarray
+
+    FILE: ClassVar[str] = "tetmesh.npz"
+    SCHEMA: ClassVar[Schema] = {"vertices": (2, "f", (3,)), "tets": (2, "iu", (4,))}
+    DTYPES: ClassVar[dict[str, type]] = {"vertices": np.float64, "tets": np.int32}
+
+    def __post_init__(self) -> None:
+        self._freeze()
+        if self.vertices.ndim != 2 or self.vertices.shape[1] != 3:
+            raise ValueError(f"vertices must be (V, 3), got {self.vertices.shape}")
+        if self.tets.ndim != 2 or self.tets.shape[1] != 4:
+            raise ValueError(f"tets must be (T, 4), got {self.tets.shape}")
+        if self.tets.size and (self.tets.min() < 0 or self.tets.max() >= len(self.vertices)):
+            raise ValueError("tets index outside vertices")
+
+
+@dataclass(frozen=True, eq=False)
+class Field(_Stage):
+    """The slicing scalar field and the iso-values of the layers.
+
+    Attributes:
+        g: (V,) float64, scalar field on tet vertices (mm-like: its gradient norm is ~1
+            where the layer height equals the target).
+        iso: (L,) float64, iso-value of each layer, increasing in print order.
+    """
+
+    g: np.ndarray
+    iso: np.ndarray
+
+    FILE: ClassVar[str] = "field.npz"
+    SCHEMA: ClassVar[Schema] = {"g": (1, "f", None), "iso": (1, "f", None)}
+    DTYPES: ClassVar[dict[str, type]] = {"g": np.float64, "iso": np.float64}
+
+    def __post_init__(self) -> None:
+        self._freeze()
+        if self.iso.size > 1 and np.any(np.diff(self.iso) <= 0):
+            raise ValueError("iso-values must increase")
+
+
+@dataclass(frozen=True, eq=False)
+class Layers(_Stage):
+    """All curved layers as one triangle soup-with-sharing, tagged per face.
+
+    Attributes:
+        vertices: (n, 3) float64, mm.
+        faces: (m, 3) int32, vertex indices; oriented so the face normal points along the
+            growth direction (away from material already printed).
+        face_layer: (m,) int32, layer index of each face (0 = printed first).
+        vertex_height: (n,) float64, mm, physical distance to the next layer along the
+            growth direction.
+        vertex_direction: (n, 3) float64, unit printing direction (normalised field gradient).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    face_layer: np.ndarray
+    vertex_height: np.ndarray
+    vertex_direction: np.ndarray
+
+    FILE: ClassVar[str] = "layers.npz"
+    SCHEMA: ClassVar[Schema] = {
+        "vertices": (2, "f", (3,)),
+        "faces": (2, "iu", (3,)),
+        "face_layer": (1, "iu", None),
+        "vertex_height": (1, "f", None),
+        "vertex_direction": (2, "f", (3,)),
+    }
+    DTYPES: ClassVar[dict[str, type]] = {
+        "vertices": np.float64,
+        "faces": np.int32,
+        "face_layer": np.int32,
+        "vertex_height": np.float64,
+        "vertex_direction": np.float64,
+    }
+
+    def __post_init__(self) -> None:
+        self._freeze()
+        n, m = len(self.vertices), len(self.faces)
+        if self.face_layer.shape != (m,):
+            raise ValueError("face_layer must have one entry per face")
+        if self.vertex_height.shape != (n,) or self.vertex_direction.shape != (n, 3):
+            raise ValueError("vertex_height and vertex_direction need one entry per vertex")
+        if m and (self.faces.min() < 0 or self.faces.max() >= n):
+            raise ValueError("faces index outside vertices")
+
+    @property
+    def layer_count(self) -> int:
+        """Number of layers (max layer index + 1)."""
+        return int(self.face_layer.max()) + 1 if len(self.face_layer) else 0
+
+    def layer(self, index: int) -> LayerMesh:
+        """One layer as a compact triangle mesh with its own vertex numbering."""
+        faces = self.faces[self.face_layer == index]
+        used, inverse = np.unique(faces, return_inverse=True)
+        return LayerMesh(
+            index=index,
+            vertices=self.vertices[used],
+            faces=inverse.reshape(-1, 3).astype(np.int32),
+            height=self.vertex_height[used],
+            direction=self.vertex_direction[used],
+        )
+
+
+@dataclass(frozen=True, eq=False)
+class LayerMesh:
+    """One layer (possibly several connected components) with its own numbering.
+
+    Attributes:
+        index: int, layer index.
+        vertices: (n, 3) float64, mm.
+        faces: (m, 3) int32.
+        height: (n,) float64, mm, layer height H.
+        direction: (n, 3) float64, unit printing direction.
+    """
+
+    index: int
+    vertices: np.ndarray
+    faces: np.ndarray
+    height: np.ndarray
+    direction: np.ndarray
+
+
+PATTERN_CONTOUR = 0
+PATTERN_STRIPE = 1
+
+
+@dataclass(frozen=True, eq=False)
+class Toolpath(_Stage):
+    """Waypoints in print order (design.md, ``toolpath.npz``).
+
+    Attributes:
+        position: (N, 3) float64, mm, nozzle tip in the model frame.
+        normal: (N, 3) float64, unit printing direction; the nozzle approaches along -normal.
+        layer: (N,) int32, layer index.
+        path: (N,) int32, id of a continuous extrusion path, increasing in print order.
+        height: (N,) float64, mm, layer height H.
+        width: (N,) float64, mm, target toolpath width W.
+        speed: (N,) float64, mm/s, nozzle speed v.
+        extrude: (N,) bool, False = travel without deposition.
+        pattern: (N,) int8, 0 = boundary-conformal contour, 1 = stripe.
+    """
+
+    position: np.ndarray
+    normal: np.ndarray
+    layer: np.ndarray
+    path: np.ndarray
+    height: np.ndarray
+    width: np.ndarray
+    speed: np.ndarray
+    extrude: np.ndarray
+    pattern: np.ndarray
+
+    FILE: ClassVar[str] = "toolpath.npz"
+    SCHEMA: ClassVar[Schema] = {
+        "position": (2, "f", (3,)),
+        "normal": (2, "f", (3,)),
+        "layer": (1, "iu", None),
+        "path": (1, "iu", None),
+        "height": (1, "f", None),
+        "width": (1, "f", None),
+        "speed": (1, "f", None),
+        "extrude": (1, "b", None),
+        "pattern": (1, "iu", None),
+    }
+    DTYPES: ClassVar[dict[str, type]] = {
+        "position": np.float64,
+        "normal": np.float64,
+        "layer": np.int32,
+        "path": np.int32,
+        "height": np.float64,
+        "width": np.float64,
+        "speed": np.float64,
+        "extrude": np.bool_,
+        "pattern": np.int8,
+    }
+
+    def __post_init__(self) -> None:
+        self._freeze()
+        n = len(self.position)
+        for name in self.DTYPES:
+            if len(getattr(self, name)) != n:
+                raise ValueError(f"'{name}' has {len(getattr(self, name))} rows, expected {n}")
+
+    def __len__(self) -> int:
+        return len(self.position)
