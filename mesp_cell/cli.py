@@ -15,7 +15,6 @@ from collections.abc import Sequence
 from slicer.errors import InputError
 
 
-
 def command_modules() -> list[str]:
     """Names of the sub-command modules: each has ``register(subparsers)`` setting ``func``."""
     import mesp_cell.commands as package

@@ -28,12 +28,14 @@ class ConsoleProgress:
             return
         self._last = now
         bar = "#" * int(20 * min(max(fraction, 0.0), 1.0))
-        self.stream.write(f"  {self._stage:<16} [{bar:<20}] {100 * fraction:5.1f}% {detail}\x1b[K\r")
+        line = f"  {self._stage:<16} [{bar:<20}] {100 * fraction:5.1f}% {detail}"
+        self.stream.write(line + "\x1b[K\r")
         self.stream.flush()
 
     def end(self, stage: str, seconds: float) -> None:
         if not self.quiet:
-            self.stream.write(f"  {stage:<16} done in {seconds:7.2f} s\x1b[K\n")
+            clear = "\x1b[K" if self.live else ""
+            self.stream.write(f"  {stage:<16} done in {seconds:7.2f} s{clear}\n")
             self.stream.flush()
 
     def info(self, text: str) -> None:

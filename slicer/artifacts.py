@@ -43,7 +43,8 @@ def save_npz(path: Path, arrays: Mapping[str, npt.ArrayLike]) -> None:
     os.close(fd)
     try:
         with open(tmp, "wb") as handle:
-            np.savez(handle, **{k: np.asarray(v) for k, v in arrays.items()})
+            named: dict[str, Any] = {k: np.asarray(v) for k, v in arrays.items()}
+            np.savez(handle, **named)
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(tmp, path)

@@ -1,0 +1,91 @@
+"""Slicing benchmark on the bundled examples at the paper's sizes (Table 1).
+
+Each example runs `mesp slice` in its own process (so peak memory is per example) and the
+stage timings are read back from its report.json. Usage:
+
+    .venv/bin/python bench/run.py [--examples socket aorta ...] [--until layers|toolpath]
+                                  [--repeat N] [--out bench/results]
+
+Prints one row per example: tets, layers, stage timings (median over repeats), peak memory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLES = ROOT / "examples"
+
+# Paper Table 1: tets, curved slicing s, toolpath s (C++/MKL on a desktop).
+PAPER = {
+    "socket": (255_800, 57.2, 198.5),
+    "actuator": (207_300, 37.2, 29.6),
+    "aorta": (115_500, 15.1, 20.8),
+    "membrane": (197_500, 11.9, 64.2),
+}
+
+
+def run_one(name: str, until: str, out: Path, edge: float | None) -> dict[str, object]:
+    """Slice one example in a child process; returns its report plus peak memory (MB)."""
+    model = next(EXAMPLES.glob(f"{name}.*[lLyY]"))
+    job = EXAMPLES / f"{name}.toml"
+    cmd = [sys.executable, "-m", "mesp_cell.cli", "slice", str(model), "--out", str(out)]
+    cmd += ["--until", until, "--quiet"]
+    if job.is_file():
+        cmd += ["--job", str(job)]
+    if edge is not None:
+        cmd += ["--edge-length", str(edge)]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    start = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - start
+    if proc.returncode != 0:
+        raise SystemExit(f"{name}: mesp slice failed:\n{proc.stderr}")
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    report = json.loads((out / "report.json").read_text())
+    report["bench"] = {"wall_s": wall, "peak_mb": max(peak, before) / 1024.0}
+    return report
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--examples", nargs="+", default=list(PAPER))
+    parser.add_argument("--until", default="toolpath", choices=["tetmesh", "layers", "toolpath"])
+    parser.add_argument("--repeat", type=int, default=1)
+    parser.add_argument("--edge-length", type=float, default=None)
+    parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
+    args = parser.parse_args()
+
+    stages = ["load", "tetrahedralize", "slicing", "toolpath", "total"]
+    header = f"{'model':<10}{'tets':>9}{'layers':>8}" + "".join(f"{s:>15}" for s in stages)
+    print(header + f"{'peak MB':>10}{'paper slicing/toolpath s':>26}")
+    for name in args.examples:
+        runs = [
+            run_one(name, args.until, args.out / name, args.edge_length) for _ in range(args.repeat)
+        ]
+        last = runs[-1]
+        timing = {
+            s: statistics.median(float(r["timing_s"].get(s, float("nan"))) for r in runs)  # type: ignore[union-attr]
+            for s in stages
+        }
+        peak = max(float(r["bench"]["peak_mb"]) for r in runs)  # type: ignore[index]
+        paper = PAPER.get(name)
+        paper_txt = f"{paper[1]:.1f} / {paper[2]:.1f}" if paper else "-"
+        print(
+            f"{name:<10}{last['mesh']['tets']:>9}{last.get('slicing', {}).get('layers', '-'):>8}"  # type: ignore[index,union-attr]
+            + "".join(f"{timing[s]:>15.2f}" for s in stages)
+            + f"{peak:>10.0f}{paper_txt:>26}"
+        )
+        (args.out / f"{name}.json").write_text(json.dumps(runs, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

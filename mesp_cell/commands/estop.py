@@ -1,0 +1,41 @@
+"""`mesp estop`: stop every motion and extrusion of a running cell at once."""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+from slicer.errors import InputError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "estop", help="emergency stop: robot and extruder stop at once",
+        description="Publish an e-stop on the cell bus: the robot node stops its stream "
+        "(servoStop) and the extruder node stops the motor and latches the e-stop fault. The "
+        "printing job becomes 'interrupted'. Nothing moves again until `mesp estop --reset`. "
+        "This is a software stop; it does not replace the cell's hardware e-stop circuit.")
+    p.add_argument("--reason", default="operator", help="text recorded with the stop")
+    p.add_argument("--reset", action="store_true", help="clear a latched e-stop instead")
+    p.add_argument("--on", metavar="CELL", default=None, help="name of the running cell")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from mesp_cell.launcher import CellClient
+
+    client = CellClient.for_cell(args.on)
+    try:
+        if args.reset:
+            bad = client.reset_estop()
+            if bad:
+                raise InputError(f"{', '.join(bad)} did not confirm the reset",
+                                 "check that the cell is running (`mesp launch`)")
+            print("e-stop cleared")
+            return 0
+        client.estop(args.reason)
+        time.sleep(0.05)  # let the message leave before the session closes
+        print(f"e-stop sent to cell '{client.cell}'")
+    finally:
+        client.close()
+    return 0

@@ -1,0 +1,244 @@
+"""`mesp inspect DIR`: simulated deposition of a sliced job and its print quality."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from slicer.errors import InputError
+
+DEFAULT_PROFILE = "ecoflex-0030"
+DEFAULT_VOXEL_MM = 0.25
+AUTO_VOXEL_BUDGET = 40_000_000  # voxels of the default grid (about a minute, a few GB)
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``inspect`` sub-command."""
+    p = subparsers.add_parser(
+        "inspect",
+        help="simulate the deposition of a sliced job: infill, pores, surface error",
+        description=(
+            "Virtual print of DIR/toolpath.npz into the support gel on a voxel grid (constant "
+            "extrusion rate, filament morphology from the extrusion profile, immiscible ink "
+            "whose excess spreads into nearby free space), measured against DIR/model.ply: "
+            "infill ratio, pore ratio, over-deposition, surface error (mean, p95, max) and "
+            "per-layer over/under-deposition. Optionally the same for a planar baseline "
+            "(--baseline planar) or a commercial slicer's G-code (--gcode FILE), side by side. "
+            "Adds an 'inspect' section to DIR/report.json and writes inspect_*.png into DIR."
+        ),
+    )
+    p.add_argument("dir", metavar="DIR", type=Path, help="job directory written by `mesp slice`")
+    p.add_argument("--voxel", type=float, default=None, metavar="MM",
+                   help=f"voxel edge in mm (default {DEFAULT_VOXEL_MM}, coarser for models too "
+                        f"large for {AUTO_VOXEL_BUDGET:,} voxels)")
+    group = p.add_mutually_exclusive_group()
+    group.add_argument("--baseline", choices=["planar"],
+                       help="also print the model with planar layers and compare")
+    group.add_argument("--gcode", type=Path, metavar="FILE",
+                       help="also print this planar G-code (Cura/PrusaSlicer) and compare")
+    p.add_argument("--profile", default=None, metavar="NAME",
+                   help=f"extrusion profile name or TOML path (default {DEFAULT_PROFILE})")
+    p.add_argument("--baseline-height", type=float, default=None, metavar="MM",
+                   help="planar baseline layer height (default: median toolpath height)")
+    p.add_argument("--baseline-beta", type=float, default=None, metavar="B",
+                   help="planar baseline overlap ratio (default sqrt(pi)/2, volume-matching)")
+    p.add_argument("--filament", type=float, default=1.75, metavar="MM",
+                   help="filament diameter the G-code's E refers to (0 = volumetric E)")
+    p.add_argument("--no-figures", action="store_true", help="do not write the PNG pictures")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute `mesp inspect`."""
+    from mesp_cell.console import ConsoleProgress
+    from sim.deposition import DepositionConfig
+    from slicer.progress import StageTimer
+    from slicer.report import update_report
+    from slicer.stages import Toolpath
+
+    job = Path(args.dir)
+    if not job.is_dir():
+        raise InputError(f"job directory {job} does not exist", "run mesp slice MODEL --out DIR")
+    if not (job / Toolpath.FILE).is_file():
+        raise InputError(f"{job} has no {Toolpath.FILE}", f"run mesp slice MODEL --out {job}")
+    if not (job / "model.ply").is_file():
+        raise InputError(f"{job} has no model.ply", f"re-run mesp slice MODEL --out {job}")
+    if args.voxel is not None and not (np.isfinite(args.voxel) and 0.01 <= args.voxel <= 10.0):
+        raise InputError(f"--voxel {args.voxel} is out of range", "use 0.01 to 10 mm, e.g. 0.25")
+    if args.gcode is not None and not Path(args.gcode).is_file():
+        raise InputError(f"G-code file {args.gcode} does not exist", "check the --gcode path")
+    if args.filament < 0:
+        raise InputError(f"--filament {args.filament} is negative", "use a diameter, or 0")
+    for name, value, lo, hi in (("--baseline-height", args.baseline_height, 0.02, 20.0),
+                                ("--baseline-beta", args.baseline_beta, 0.1, 1.0)):
+        if value is not None and not lo <= value <= hi:
+            raise InputError(f"{name} {value} is out of range", f"use {lo} to {hi}")
+    console = ConsoleProgress(quiet=args.quiet)
+    timer = StageTimer(console)
+    with timer.stage("load"):
+        toolpath = Toolpath.load(job)
+        vertices, faces = _load_model(job / "model.ply")
+        morphology, profile_name = _load_morphology(args.profile, console)
+    voxel = args.voxel if args.voxel is not None else _auto_voxel(vertices, console)
+    config = DepositionConfig(voxel_mm=float(voxel))
+    result = _simulate("multi-axis", toolpath, morphology, vertices, faces, config, timer)
+    section: dict[str, Any] = {**result["summary"], "voxel_mm": config.voxel_mm,
+                               "profile": profile_name}
+    base: dict[str, Any] | None = None
+    if args.baseline or args.gcode:
+        with timer.stage("baseline toolpath"):
+            base_tp, base_info = _baseline_toolpath(args, toolpath, morphology, vertices, faces)
+        base = _simulate("baseline", base_tp, morphology, vertices, faces, config, timer)
+        section["baseline"] = {**base_info, **base["summary"]}
+        section["comparison"] = _comparison(result["summary"], base["summary"])
+    if not args.no_figures:
+        with timer.stage("figures"):
+            section["figures"] = _figures(job, result, base)
+    section["timing_s"] = {k: round(v, 3) for k, v in timer.seconds.items()}
+    update_report(job, {"inspect": section})
+    print(_table(result["summary"], base["summary"] if base else None,
+                 section.get("baseline", {}).get("kind", "")))
+    return 0
+
+
+def _auto_voxel(vertices: np.ndarray, console: Any) -> float:
+    """The default voxel, coarsened so the model's grid stays within the budget."""
+    extent = np.ptp(vertices, axis=0) + 8.0  # the grid's padding and filament overhang
+    need = float(np.prod(extent)) / AUTO_VOXEL_BUDGET
+    voxel = max(DEFAULT_VOXEL_MM, float(np.ceil(100.0 * need ** (1.0 / 3.0))) / 100.0)
+    if voxel > DEFAULT_VOXEL_MM:
+        console.info(f"note: model is large; using --voxel {voxel:.2f} (pass --voxel to choose)")
+    return voxel
+
+
+def _load_model(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    try:
+        mesh = trimesh.load(path, force="mesh", process=False)
+    except Exception as exc:  # trimesh raises many types for a broken file
+        raise InputError(f"{path} is not a readable mesh ({exc})", "re-run mesp slice") from exc
+    faces = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
+    if faces.ndim != 2 or len(faces) == 0:
+        raise InputError(f"{path} has no triangles", "re-run mesp slice")
+    vertices = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
+    return vertices, faces
+
+
+def _load_morphology(name: str | None, console: Any) -> tuple[Any, str]:
+    """The extrusion profile (slicer.extrusion), or a plain ellipse model if it is missing."""
+    from sim.deposition import EllipseMorphology
+
+    try:
+        from slicer.extrusion import load_profile
+    except ImportError:
+        if name is not None:
+            raise InputError("extrusion profiles are not available in this installation",
+                             "drop --profile") from None
+        console.info("note: no extrusion profile module; using a round filament at C = 6.57")
+        return EllipseMorphology(), "ellipse (default)"
+    chosen = name or DEFAULT_PROFILE
+    return load_profile(chosen), chosen
+
+
+def _simulate(label: str, toolpath: Any, morphology: Any, vertices: np.ndarray,
+              faces: np.ndarray, config: Any, timer: Any) -> dict[str, Any]:
+    from sim.deposition import covering_grid, deposit
+    from sim.metrics import inspect_deposit
+
+    bounds = np.stack([vertices.min(axis=0), vertices.max(axis=0)])
+    with timer.stage(f"{label} deposition"):
+        grid = covering_grid(toolpath, morphology, bounds, config)
+        dep = deposit(toolpath, morphology, config, grid=grid, progress=timer.progress)
+    with timer.stage(f"{label} metrics"):
+        quality = inspect_deposit(dep, vertices, faces, toolpath)
+    summary = quality.summary()
+    summary.update({
+        "commanded_volume_mm3": dep.commanded_mm3,
+        "volume_conservation_error": dep.volume_error,
+        "deposition_status": dep.status,
+        "grid_shape": list(dep.grid.shape),
+        "waypoints": len(toolpath),
+        "layers": int(np.unique(toolpath.layer).size),
+    })
+    return {"deposit": dep, "quality": quality, "summary": summary}
+
+
+def _baseline_toolpath(args: argparse.Namespace, toolpath: Any, morphology: Any,
+                       vertices: np.ndarray, faces: np.ndarray) -> tuple[Any, dict[str, Any]]:
+    from sim.baseline import VOLUME_MATCHING_BETA, PlanarConfig, planar_toolpath
+    from sim.gcode import GcodeOptions, align_to_bounds, read_gcode
+
+    if args.gcode:
+        opts = GcodeOptions(filament_diameter_mm=args.filament,
+                            rate_mm3_s=float(morphology.rate_mm3_s))
+        tp = read_gcode(args.gcode, opts)
+        bounds = np.stack([vertices.min(axis=0), vertices.max(axis=0)])
+        return align_to_bounds(tp, bounds), {"kind": "gcode", "file": str(args.gcode)}
+    ext = toolpath.extrude
+    height = args.baseline_height or (float(np.median(toolpath.height[ext])) if ext.any()
+                                      else 0.6)
+    beta = args.baseline_beta or VOLUME_MATCHING_BETA
+    cfg = PlanarConfig(layer_height_mm=height, beta=beta)
+    tp = planar_toolpath(vertices, faces, morphology, cfg)
+    return tp, {"kind": "planar", "layer_height_mm": float(tp.height[0]), "beta": beta,
+                "width_mm": float(tp.width[0]), "speed_mm_s": float(tp.speed[0])}
+
+
+def _figures(job: Path, result: dict[str, Any], base: dict[str, Any] | None) -> list[str]:
+    from sim.inspect_figures import ct_slices, error_map, layer_plot
+
+    files = [
+        ct_slices(job / "inspect_ct.png", result["deposit"], result["quality"],
+                  "multi-axis: simulated CT slices"),
+        error_map(job / "inspect_error_map.png", result["quality"],
+                  "multi-axis: surface error on the model"),
+    ]
+    if base is not None:
+        files.append(ct_slices(job / "inspect_baseline_ct.png", base["deposit"],
+                               base["quality"], "baseline: simulated CT slices"))
+        files.append(error_map(job / "inspect_baseline_error_map.png", base["quality"],
+                               "baseline: surface error on the model"))
+    files.append(layer_plot(job / "inspect_layers.png", result["quality"],
+                            base["quality"] if base else None))
+    return [p.name for p in files]
+
+
+def _comparison(main: dict[str, Any], base: dict[str, Any]) -> dict[str, Any]:
+    """Side by side with the paper's measurements (section 5.3, aorta and socket prints)."""
+    return {
+        "surface_error_mean_mm": {"multi_axis": main["surface_error_mm"]["mean"],
+                                  "baseline": base["surface_error_mm"]["mean"],
+                                  "paper_multi_axis": 0.20, "paper_planar": 0.49},
+        "infill_ratio": {"multi_axis": main["infill_ratio"], "baseline": base["infill_ratio"],
+                         "paper_multi_axis": 0.9947},
+        "pore_ratio": {"multi_axis": main["pore_ratio"], "baseline": base["pore_ratio"],
+                       "paper_multi_axis": 0.0025},
+        "over_deposition": {"multi_axis": main["over_deposition"],
+                            "baseline": base["over_deposition"]},
+    }
+
+
+def _table(main: dict[str, Any], base: dict[str, Any] | None, kind: str) -> str:
+    """Side-by-side table, with the paper's numbers for reference."""
+    rows = [
+        ("infill ratio %", lambda s: 100 * s["infill_ratio"], "99.47"),
+        ("pore ratio %", lambda s: 100 * s["pore_ratio"], "0.25"),
+        ("over-deposition %", lambda s: 100 * s["over_deposition"], "-"),
+        ("under-deposition %", lambda s: 100 * s["under_deposition"], "-"),
+        ("surface error mean mm", lambda s: s["surface_error_mm"]["mean"], "0.20 (planar 0.49)"),
+        ("surface error p95 mm", lambda s: s["surface_error_mm"]["p95"], "-"),
+        ("surface error max mm", lambda s: s["surface_error_mm"]["max"], "< 1.5"),
+    ]
+    head = f"{'':24}{'multi-axis':>12}" + (f"{kind or 'baseline':>12}" if base else "")
+    lines = [head + f"   {'paper':<20}"]
+    for name, get, paper in rows:
+        line = f"{name:24}{get(main):12.3f}"
+        if base:
+            line += f"{get(base):12.3f}"
+        lines.append(line + f"   {paper:<20}")
+    return "\n".join(lines)

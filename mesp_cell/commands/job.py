@@ -1,0 +1,143 @@
+"""`mesp job ...`: submit, list, status, pause, resume, abort print jobs."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from mesp_cell.jobs import FINAL, JobRecord
+from slicer.errors import InputError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "job", help="operator commands: submit, list, status, pause, resume, abort",
+        description="Queue print jobs on a running cell and follow or control them. The job "
+        "store is $MESP_HOME/jobs.sqlite (default ~/.mesp).")
+    p.add_argument("--on", metavar="CELL", default=None,
+                   help="name of the running cell (default: the only one running, else 'sim')")
+    sub = p.add_subparsers(dest="action", metavar="ACTION")
+    sub.required = True
+    s = sub.add_parser("submit", help="check and queue a model for printing")
+    s.add_argument("model", type=Path, help="model file (STL, OBJ, ...)")
+    s.add_argument("--job", type=Path, help="job TOML (overrides slicer/defaults.toml)")
+    s.add_argument("--cell", type=Path, help="cell TOML (default: the bundled cell)")
+    s.add_argument("--wait", action="store_true", help="follow the job until it ends")
+    s.set_defaults(func=submit)
+    ls = sub.add_parser("list", help="list jobs, newest last")
+    ls.add_argument("--all", action="store_true", help="include finished jobs")
+    ls.set_defaults(func=list_jobs)
+    st = sub.add_parser("status", help="a job's state and live progress")
+    st.add_argument("job_id")
+    st.add_argument("--follow", "-f", action="store_true", help="update until the job stops")
+    st.set_defaults(func=status)
+    for verb, text in (("pause", "pause a printing job (resumable)"),
+                       ("resume", "resume a paused or interrupted job from its checkpoint"),
+                       ("abort", "abort a job (not resumable)")):
+        c = sub.add_parser(verb, help=text)
+        c.add_argument("job_id")
+        c.set_defaults(func=control, verb=verb)
+
+
+def _client(args: argparse.Namespace):  # type: ignore[no-untyped-def]
+    from mesp_cell.launcher import CellClient
+
+    return CellClient.for_cell(args.on)
+
+
+def line(job: JobRecord) -> str:
+    """One status line: state, layer, percent, ETA, volume, reason."""
+    text = f"{job.id:<20} {job.state:<11}"
+    if job.samples:
+        layer = f"{job.layer + 1}/{job.layers}" if job.layer >= 0 else f"-/{job.layers}"
+        text += (f" layer {layer:>7}  {job.percent:5.1f}%  ETA {job.eta_s:6.1f} s  "
+                 f"{job.volume:8.1f} mm^3")
+    if job.reason:
+        text += f"  ({job.reason})"
+    return text
+
+
+def submit(args: argparse.Namespace) -> int:
+    client = _client(args)
+    try:
+        job = client.submit(args.model, args.job, args.cell)
+        print(f"submitted {job.id} to cell '{job.cell}' (dir {job.dir})")
+        if not client.running:
+            print(f"note: cell '{client.cell}' is not running; the job waits for "
+                  "`mesp launch`", file=sys.stderr)
+        if args.wait:
+            return _follow(client, job.id)
+    finally:
+        client.close()
+    return 0
+
+
+def list_jobs(args: argparse.Namespace) -> int:
+    client = _client(args)
+    try:
+        jobs = client.store.query(client.cell)
+        if not args.all:
+            jobs = [j for j in jobs if j.state not in FINAL]
+        for job in jobs:
+            print(line(job))
+        if not jobs:
+            print("no jobs" + ("" if args.all else " (use --all for finished ones)"))
+    finally:
+        client.close()
+    return 0
+
+
+def _follow(client, job_id: str) -> int:  # type: ignore[no-untyped-def]
+    tty = sys.stdout.isatty()
+    last = ""
+    job = client.status(job_id)
+    while True:
+        text = line(job)
+        if text != last:
+            print(text + ("\x1b[K\r" if tty else "\n"), end="", flush=True)
+            last = text
+        if job.state in FINAL or (job.state in ("paused", "interrupted") and not job.resume):
+            break
+        time.sleep(0.5)
+        job = client.status(job_id)
+    if tty:
+        print()
+    return 0 if job.state == "done" else 1
+
+
+def status(args: argparse.Namespace) -> int:
+    client = _client(args)
+    try:
+        if args.follow:
+            return _follow(client, args.job_id)
+        print(line(client.status(args.job_id)))
+    finally:
+        client.close()
+    return 0
+
+
+def control(args: argparse.Namespace) -> int:
+    client = _client(args)
+    try:
+        job = client.status(args.job_id)
+        if not client.running:
+            if args.verb == "abort" and job.state in ("submitted", "sliced", "planned", "paused",
+                                                      "interrupted"):
+                client.store.transition(job.id, "aborted", "aborted by the operator")
+                print(f"{job.id} aborted")
+                return 0
+            if args.verb == "resume":
+                client.store.request_resume(job.id)
+                print(f"{job.id} will resume when the cell runs")
+                return 0
+            raise InputError(f"cell '{client.cell}' is not running",
+                             "start it with `mesp launch sim`")
+        reply = client.command(args.verb, job.id)
+        if not reply.ok:
+            raise InputError(reply.reason, "see `mesp job status`")
+        print(f"{job.id}: {args.verb} requested")
+    finally:
+        client.close()
+    return 0

@@ -1,0 +1,65 @@
+"""`mesp launch FILE`: start the processes a launch description names and watch them."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from slicer.errors import InputError
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser(
+        "launch", help="start the cell's processes from a launch file",
+        description="Start every process of a launch description (launch/sim.toml: the twin "
+        "and the emulated extruder; launch/cell.toml: the real UR5e and extruder), keep one log "
+        "per process, restart or fail fast per process, and stop everything on Ctrl-C.")
+    p.add_argument("file", help="launch TOML, or a bundled name: sim | cell")
+    p.add_argument("--set", action="append", default=[], metavar="VAR=VALUE",
+                   help="override a [vars] entry (repeatable), e.g. --set true_gain=1.1")
+    p.add_argument("--log-dir", type=Path, help="where the per-process logs go")
+    p.set_defaults(func=run)
+
+
+def parse_sets(items: list[str]) -> dict[str, object]:
+    """``VAR=VALUE`` strings -> a dict (numbers become numbers)."""
+    out: dict[str, object] = {}
+    for item in items:
+        name, eq, value = item.partition("=")
+        if not eq or not name:
+            raise InputError(f"--set '{item}' is not VAR=VALUE", "write e.g. --set true_gain=1.1")
+        try:
+            out[name] = int(value)
+        except ValueError:
+            try:
+                out[name] = float(value)
+            except ValueError:
+                out[name] = value
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from mesp_cell.launcher import Launch, LaunchFailed, bundled_launch, load_launch
+
+    path = Path(args.file)
+    if not path.is_file() and bundled_launch(args.file).is_file():
+        path = bundled_launch(args.file)
+    if not path.is_file():
+        raise InputError(f"launch file {path} does not exist",
+                         "give a path or a bundled name: sim, cell")
+    spec = load_launch(path, parse_sets(args.set))
+
+    def say(text: str) -> None:
+        print(f"mesp launch: {text}", file=sys.stderr, flush=True)
+
+    launch = Launch(spec, log_dir=args.log_dir, on_event=say)
+    try:
+        launch.start()
+    except LaunchFailed as exc:
+        raise InputError(str(exc), "read the process log") from exc
+    say(f"cell '{spec.cell}' running (bus hub {spec.hub}); logs in {launch.log_dir}; "
+        "Ctrl-C stops it")
+    code = launch.run_forever()
+    say("stopped" if code == 0 else f"failed: {launch.failed}")
+    return code

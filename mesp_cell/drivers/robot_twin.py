@@ -1,0 +1,205 @@
+"""Twin backends of the robot driver: the same interface as the UR5e, no hardware.
+
+``KinematicTwin`` integrates the commanded joint positions with a first-order servo response
+(time constant ``lookahead_s * 75 / gain``: 25 ms at the defaults, a model of servoJ's
+smoothing), clamped to the UR5e joint speed limit. ``MujocoTwin`` steps the MuJoCo model of
+``sim.twin`` (position + velocity actuators) instead. Both keep real time (scaled by
+``servo.time_scale``) in ``init_period``/``wait_period``, and both can be made to fail
+(protective stop, link loss) for the safety tests.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+
+from mesp_cell.drivers.robot_base import UR5E_QD_LIMIT, ServoConfig, ur5e_flange
+
+HOME_Q = np.deg2rad([0.0, -90.0, 90.0, -90.0, -90.0, 0.0])
+
+
+def precise_sleep_until(deadline: float) -> None:
+    """Sleep until ``time.perf_counter()`` reaches ``deadline``: coarse sleep, then a short spin.
+
+    The final 0.3 ms spins so the 500 Hz loop's period jitter stays well under 0.5 ms.
+    """
+    remaining = deadline - time.perf_counter()
+    if remaining > 0.0003:
+        time.sleep(remaining - 0.0003)
+    while time.perf_counter() < deadline:
+        pass
+
+
+class KinematicTwin:
+    """A UR5e twin that integrates servo targets kinematically.
+
+    Args:
+        servo: servo parameters. q0: (6,) float64, rad, initial joints (home by default).
+        tool_T: (4, 4) float64, mm, nozzle tip in the flange frame.
+    """
+
+    def __init__(self, servo: ServoConfig, q0: np.ndarray | None = None,
+                 tool_T: np.ndarray | None = None) -> None:
+        self.servo = servo
+        self.q = np.array(HOME_Q if q0 is None else q0, dtype=np.float64)
+        self.qd = np.zeros(6)
+        self.tool_T = np.eye(4) if tool_T is None else np.asarray(tool_T, dtype=np.float64)
+        self._connected = False
+        self._pstop = False
+        self._lock = threading.Lock()
+        self.stop_times: list[float] = []  # time.time() of every servo_stop/stop_j
+        self.commands = 0
+
+    # -- link ------------------------------------------------------------------------------
+    def connect(self) -> None:
+        self._connected = True
+
+    def close(self) -> None:
+        self._connected = False
+
+    def reconnect(self) -> bool:
+        self._connected = True
+        return True
+
+    def connected(self) -> bool:
+        return self._connected
+
+    def protective_stopped(self) -> bool:
+        return self._pstop
+
+    def inject_protective_stop(self) -> None:
+        """Make the twin refuse motion as a real controller does after a protective stop."""
+        self._pstop = True
+
+    def clear_protective_stop(self) -> None:
+        self._pstop = False
+
+    def inject_link_loss(self) -> None:
+        self._connected = False
+
+    def kick_watchdog(self) -> None:
+        """The twin dies with its process, so there is nothing to stop on a missed kick."""
+
+    # -- timing ----------------------------------------------------------------------------
+    def init_period(self) -> float:
+        return time.perf_counter()
+
+    def wait_period(self, t_start: float) -> None:
+        precise_sleep_until(t_start + self.servo.dt / self.servo.time_scale)
+
+    # -- motion ----------------------------------------------------------------------------
+    def _step(self, target: np.ndarray, dt: float) -> None:
+        tau = self.servo.lookahead_s * 75.0 / self.servo.gain
+        step = (target - self.q) * min(1.0, dt / tau)
+        step = np.clip(step, -UR5E_QD_LIMIT * dt, UR5E_QD_LIMIT * dt)
+        self.qd = step / dt
+        self.q = self.q + step
+
+    def servo_j(self, q: np.ndarray) -> bool:
+        if not self._connected or self._pstop:
+            return False
+        with self._lock:
+            self._step(np.asarray(q, dtype=np.float64), self.servo.dt)
+            self.commands += 1
+        return True
+
+    def servo_stop(self) -> None:
+        with self._lock:
+            self.qd = np.zeros(6)
+            self.stop_times.append(time.time())
+
+    def stop_j(self) -> None:
+        self.servo_stop()
+
+    def move_j(self, q: np.ndarray) -> bool:
+        """Point-to-point move at ``servo.move_speed`` (blocking, time-scaled)."""
+        if not self._connected or self._pstop:
+            return False
+        target = np.asarray(q, dtype=np.float64)
+        dist = float(np.max(np.abs(target - self.q)))
+        duration = max(dist / self.servo.move_speed, self.servo.dt)
+        n = max(1, int(np.ceil(duration / self.servo.dt)))
+        start = self.q.copy()
+        s = 0.5 - 0.5 * np.cos(np.linspace(0.0, np.pi, n + 1)[1:])  # smooth in/out
+        for k in range(n):  # a loop over servo periods: each is one controller cycle
+            t0 = self.init_period()
+            if self._pstop or not self._connected:
+                return False
+            with self._lock:
+                self._place(start + s[k] * (target - start))
+            self.wait_period(t0)
+        with self._lock:
+            self.qd = np.zeros(6)
+        return True
+
+    def _place(self, q: np.ndarray) -> None:
+        """One period of a point-to-point move: the kinematic twin follows it exactly."""
+        self.q = q
+
+    # -- state -----------------------------------------------------------------------------
+    def joints(self) -> np.ndarray:
+        return self.q.copy()
+
+    def joint_speeds(self) -> np.ndarray:
+        return self.qd.copy()
+
+    def tcp_mm(self) -> np.ndarray:
+        return np.asarray((ur5e_flange(self.q) @ self.tool_T)[:3, 3])
+
+
+class MujocoTwin(KinematicTwin):
+    """The twin on MuJoCo physics (``sim.twin.Twin``): servo targets drive the model's
+    position actuators, with the target's finite-difference rate on its velocity actuators,
+    stepped for one servo period per ``servo_j``. Timing, faults and the interface are the
+    kinematic twin's; joints, speeds and the TCP are read from the simulation."""
+
+    def __init__(self, servo: ServoConfig, q0: np.ndarray | None = None,
+                 tool_T: np.ndarray | None = None, cell_file: str | None = None) -> None:
+        from pathlib import Path
+
+        from planner.cell import load_cell
+        from sim.twin import Twin, mujoco
+
+        super().__init__(servo, q0=q0, tool_T=tool_T)
+        self._mj = mujoco
+        self.sim = Twin(load_cell(Path(cell_file) if cell_file else None))
+        self.sim.set_q(self.q)
+        self._substeps = max(1, round(servo.dt / float(self.sim.model.opt.timestep)))
+        self._prev = self.q.copy()
+
+    def _drive(self, target: np.ndarray, dt: float) -> None:
+        d = self.sim.data
+        d.ctrl[:6] = target
+        d.ctrl[6:12] = (target - self._prev) / dt
+        self._prev = target.copy()
+        for _ in range(self._substeps):  # physics steps of one servo period
+            self._mj.mj_step(self.sim.model, d)
+        self.q = d.qpos[self.sim.qadr].copy()
+        self.qd = d.qvel[self.sim.dadr].copy()
+
+    def _step(self, target: np.ndarray, dt: float) -> None:
+        self._drive(target, dt)
+
+    def _place(self, q: np.ndarray) -> None:
+        self._drive(q, self.servo.dt)
+
+    def servo_stop(self) -> None:
+        with self._lock:
+            self._prev = self.q.copy()
+            self.sim.data.ctrl[:6] = self.q
+            self.sim.data.ctrl[6:12] = 0.0
+            self.qd = np.zeros(6)
+            self.stop_times.append(time.time())
+
+    def tcp_mm(self) -> np.ndarray:
+        with self._lock:  # the servo thread steps the same MjData
+            self._mj.mj_kinematics(self.sim.model, self.sim.data)
+            return np.asarray(self.sim.tcp_mm())
+
+
+def mujoco_twin(servo: ServoConfig, q0: np.ndarray | None = None,
+                tool_T: np.ndarray | None = None, cell_file: str | None = None) -> MujocoTwin:
+    """The MuJoCo backend (the cell file sets the model; None = the bundled cell)."""
+    return MujocoTwin(servo, q0=q0, tool_T=tool_T, cell_file=cell_file)

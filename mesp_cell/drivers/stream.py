@@ -1,0 +1,247 @@
+"""Trajectory streaming at the servo rate: resampling, pre-motion checks, the servo loop.
+
+``StreamPlan.load`` reads ``trajectory.npz`` (by path and sha256), refuses a bad one with a
+one-line reason before anything moves, and resamples it to the servo period. ``ServoStream``
+sends one servoJ per period inside initPeriod/waitPeriod, asks a guard before every sample
+(the robot node's interlocks: extruder alive and running, e-stop, supervisor present), reports
+every deposition waypoint it passes, and ends with servoStop.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from mesp_cell.drivers.robot_base import UR5E_Q_LIMIT, UR5E_QD_LIMIT, RobotDriver
+from slicer.artifacts import load_npz
+from slicer.errors import InputError
+
+TRAJECTORY_SCHEMA = {
+    "t": (1, "f", None), "q": (2, "f", (6,)), "qd": (2, "f", (6,)), "tcp": (2, "f", (3,)),
+    "waypoint": (1, "iu", None), "alpha": (1, "f", None), "extrude": (1, "b", None),
+    "base_T": (2, "f", (4,)), "tool_T": (2, "f", (4,)), "model_T": (2, "f", (4,)),
+}
+
+
+def sha256_of(path: Path) -> str:
+    """Hex sha256 of a file (artifacts travel by path + digest)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class StreamPlan:
+    """A trajectory resampled to the servo period.
+
+    Attributes:
+        dt: s, servo period.
+        q: (K, 6) float64, rad, joint targets, one per servo period.
+        extrude: (K,) bool, deposition at this sample.
+        wp_id: (W,) int64, toolpath waypoint indices in the order they are reached.
+        wp_sample: (W,) int64, servo sample at which each is reached (non-decreasing).
+        wp_extrude: (W,) bool, the waypoint deposits material.
+        wp_layer: (W,) int64, layer of each waypoint (-1 when toolpath.npz is absent).
+        layers: number of layers (0 when unknown).
+        tool_T: (4, 4) float64, mm, nozzle tip in the flange frame.
+    """
+
+    dt: float
+    q: np.ndarray
+    extrude: np.ndarray
+    wp_id: np.ndarray
+    wp_sample: np.ndarray
+    wp_extrude: np.ndarray
+    wp_layer: np.ndarray
+    layers: int
+    tool_T: np.ndarray
+
+    @property
+    def samples(self) -> int:
+        return int(self.q.shape[0])
+
+    def sample_of_waypoint(self, waypoint: int) -> int:
+        """Servo sample at which ``waypoint`` is reached (0 for -1 = from the start)."""
+        if waypoint < 0:
+            return 0
+        i = int(np.searchsorted(self.wp_id, waypoint))
+        if i >= len(self.wp_id) or self.wp_id[i] != waypoint:
+            raise InputError(f"waypoint {waypoint} is not in the trajectory", "check the job")
+        return int(self.wp_sample[i])
+
+    @staticmethod
+    def load(path: Path, dt: float, sha256: str = "") -> StreamPlan:
+        """Read, check and resample ``trajectory.npz``; any problem is a one-line InputError."""
+        path = Path(path)
+        if sha256 and path.is_file() and sha256_of(path) != sha256:
+            raise InputError(f"{path} changed since it was planned (sha256 mismatch)",
+                             "re-plan the job")
+        a = load_npz(path, TRAJECTORY_SCHEMA)
+        t, q = a["t"].astype(np.float64), a["q"].astype(np.float64)
+        wp, ex = a["waypoint"].astype(np.int64), a["extrude"].astype(bool)
+        M = t.shape[0]
+        if M < 2 or any(a[n].shape[0] != M for n in ("q", "qd", "tcp", "waypoint", "extrude")):
+            raise InputError(f"{path}: arrays need the same length >= 2", "re-plan the job")
+        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q))):
+            raise InputError(f"{path}: t or q holds NaN/inf", "re-plan the job")
+        if np.any(np.diff(t) <= 0):
+            i = int(np.argmax(np.diff(t) <= 0))
+            raise InputError(f"{path}: time does not increase at sample {i + 1}", "re-plan the job")
+        bad = np.abs(q) > UR5E_Q_LIMIT
+        if bad.any():
+            i, j = (int(v) for v in np.argwhere(bad)[0])
+            raise InputError(f"{path}: joint {j + 1} at sample {i} is {np.degrees(q[i, j]):.0f}"
+                             " deg, beyond the UR5e limit of +-360 deg", "re-plan the job")
+        speed = np.abs(np.diff(q, axis=0)) / np.diff(t)[:, None]
+        if np.any(speed > UR5E_QD_LIMIT * 1.05):
+            i, j = (int(v) for v in np.argwhere(speed > UR5E_QD_LIMIT * 1.05)[0])
+            raise InputError(f"{path}: joint {j + 1} needs {np.degrees(speed[i, j]):.0f} deg/s "
+                             f"at sample {i}, above the UR5e limit of 180 deg/s",
+                             "re-plan the job with a lower speed")
+        has = wp >= 0
+        if np.any(np.diff(wp[has]) <= 0):
+            raise InputError(f"{path}: waypoint indices are not increasing in time",
+                             "re-plan the job")
+        # Resample to the servo period: sample k is at t0 + k dt.
+        K = int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
+        tk = t[0] + dt * np.arange(K)
+        qk = np.stack([np.interp(tk, t, q[:, j]) for j in range(6)], axis=1)
+        src = np.clip(np.searchsorted(t, tk, side="right") - 1, 0, M - 1)
+        extrude_k = ex[src]
+        wp_id = wp[has]
+        wp_sample = np.minimum(np.ceil((t[has] - t[0]) / dt - 1e-9).astype(np.int64), K - 1)
+        wp_layer = np.full(wp_id.shape, -1, dtype=np.int64)
+        layers = 0
+        tp = path.parent / "toolpath.npz"
+        if tp.is_file():
+            from slicer.stages import Toolpath
+
+            toolpath = Toolpath.load(path.parent)
+            if wp_id.size and wp_id.max() >= toolpath.layer.shape[0]:
+                raise InputError(f"{path}: waypoint {int(wp_id.max())} is beyond the "
+                                 f"{toolpath.layer.shape[0]} waypoints of toolpath.npz",
+                                 "re-plan the job")
+            wp_layer = toolpath.layer[wp_id].astype(np.int64)
+            layers = int(toolpath.layer.max()) + 1 if toolpath.layer.size else 0
+        return StreamPlan(dt, qk, extrude_k, wp_id, wp_sample, ex[has], wp_layer, layers,
+                          np.asarray(a["tool_T"], dtype=np.float64))
+
+
+@dataclass(frozen=True)
+class StreamResult:
+    """How a stream ended.
+
+    Attributes:
+        done: the last sample was sent. reason: why it stopped early ("" if done).
+        last_sample: last sample sent (-1 if none). stop_t: time.time() of servoStop.
+        periods: (n,) float64, s, measured servo periods (for the jitter benchmark).
+    """
+
+    done: bool
+    reason: str
+    last_sample: int
+    stop_t: float
+    periods: np.ndarray
+
+
+class ServoStream:
+    """Streams ``plan`` from sample ``start`` on a driver, in the calling thread (``run``).
+
+    Args:
+        guard: called before each sample with its index; a non-empty string stops the stream
+            with that reason before the sample is sent.
+        on_sample: called after each sample is sent.
+        on_waypoint: called (waypoint index in plan arrays) for each deposition waypoint passed.
+        after_waypoint: waypoints up to this id were already deposited (resume) and are skipped.
+    """
+
+    def __init__(self, driver: RobotDriver, plan: StreamPlan, start: int = 0,
+                 guard: Callable[[int], str] | None = None,
+                 on_sample: Callable[[int], None] | None = None,
+                 on_waypoint: Callable[[int], None] | None = None,
+                 after_waypoint: int = -1) -> None:
+        if not 0 <= start < plan.samples:
+            raise InputError(f"start sample {start} outside the {plan.samples} samples",
+                             "check the checkpoint")
+        self.driver, self.plan, self.start = driver, plan, start
+        self.guard = guard or (lambda k: "")
+        self.on_sample = on_sample or (lambda k: None)
+        self.on_waypoint = on_waypoint or (lambda i: None)
+        self._next_wp = int(np.searchsorted(plan.wp_id, after_waypoint, side="right"))
+        self._stop = threading.Event()
+        self._reason = ""
+        self.sample = start - 1
+
+    def stop(self, reason: str) -> None:
+        """Ask the loop to stop before its next sample (thread-safe; at most one period)."""
+        if not self._stop.is_set():
+            self._reason = reason
+            self._stop.set()
+
+    def run(self) -> StreamResult:
+        """Stream until the end, a guard refusal, ``stop``, or a refused servoJ; then servoStop.
+
+        With ``servo.realtime_priority`` the calling thread runs SCHED_FIFO while streaming
+        (if the OS allows it; otherwise at normal priority).
+        """
+        prio = int(getattr(self.driver.servo, "realtime_priority", 0))
+        raised = False
+        if prio and hasattr(os, "sched_setscheduler"):
+            try:
+                os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(prio))
+                raised = True
+            except OSError:  # not permitted: stream at normal priority
+                pass
+        try:
+            return self._run()
+        finally:
+            if raised:
+                os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+    def _run(self) -> StreamResult:
+        d, plan = self.driver, self.plan
+        K = plan.samples
+        periods = np.zeros(K - self.start)
+        n, prev, reason = 0, 0.0, ""
+        wp_sample, wp_extrude = plan.wp_sample, plan.wp_extrude
+        overrun = float(getattr(d.servo, "overrun_s", 0.1))  # wall time, even on a fast twin
+        for k in range(self.start, K):  # one iteration per servo period (500 Hz real time)
+            t0 = d.init_period()
+            if n:
+                periods[n - 1] = t0 - prev
+                if t0 - prev > overrun:
+                    reason = f"servo loop stalled for {1000 * (t0 - prev):.0f} ms (watchdog)"
+                    break
+            prev = t0
+            n += 1
+            if self._stop.is_set():
+                reason = self._reason
+                break
+            why = self.guard(k)
+            if why:
+                reason = why
+                break
+            if not d.servo_j(plan.q[k]):
+                reason = ("protective stop" if d.protective_stopped()
+                          else "servoJ refused: link to the controller lost")
+                break
+            self.sample = k
+            while self._next_wp < len(wp_sample) and wp_sample[self._next_wp] <= k:
+                if wp_extrude[self._next_wp]:
+                    self.on_waypoint(self._next_wp)
+                self._next_wp += 1
+            self.on_sample(k)
+            d.wait_period(t0)
+        d.servo_stop()
+        stop_t = time.time()
+        done = not reason
+        return StreamResult(done, reason, self.sample, stop_t, periods[: max(n - 1, 0)])

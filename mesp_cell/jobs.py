@@ -1,0 +1,277 @@
+"""The job store: one SQLite file (WAL) shared by the console and the supervisor.
+
+States: submitted -> sliced -> planned -> printing -> done, with paused, interrupted (a node or
+link failed mid-print; resumable), failed (refused or a stage failed, with the reason) and aborted.
+While printing, the supervisor writes a checkpoint (layer, waypoint, sample) of the last
+waypoint deposited with the extruder confirmed running; a resume restarts from that sample, so
+no waypoint is printed twice or skipped. Every transition is checked and recorded in ``events``.
+"""
+
+from __future__ import annotations
+
+import re
+import sqlite3
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+from slicer.errors import InputError
+
+STATES = (
+    "submitted", "sliced", "planned", "printing", "paused", "interrupted", "done", "failed",
+    "aborted",
+)
+FINAL = frozenset({"done", "failed", "aborted"})
+TRANSITIONS: dict[str, frozenset[str]] = {
+    "submitted": frozenset({"sliced", "failed", "aborted"}),
+    "sliced": frozenset({"planned", "failed", "aborted"}),
+    "planned": frozenset({"printing", "failed", "aborted"}),
+    "printing": frozenset({"paused", "interrupted", "done", "failed", "aborted"}),
+    "paused": frozenset({"printing", "aborted", "failed"}),
+    "interrupted": frozenset({"printing", "aborted", "failed"}),
+    "done": frozenset(),
+    "failed": frozenset(),
+    "aborted": frozenset(),
+}
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS jobs (
+    id TEXT PRIMARY KEY, cell TEXT NOT NULL, state TEXT NOT NULL, model TEXT NOT NULL,
+    job_file TEXT NOT NULL, cell_file TEXT NOT NULL, dir TEXT NOT NULL, created REAL NOT NULL,
+    updated REAL NOT NULL, reason TEXT NOT NULL DEFAULT '',
+    layer INTEGER NOT NULL DEFAULT -1, waypoint INTEGER NOT NULL DEFAULT -1,
+    sample INTEGER NOT NULL DEFAULT -1, layers INTEGER NOT NULL DEFAULT 0,
+    waypoints INTEGER NOT NULL DEFAULT 0, samples INTEGER NOT NULL DEFAULT 0,
+    percent REAL NOT NULL DEFAULT 0, eta_s REAL NOT NULL DEFAULT 0,
+    volume REAL NOT NULL DEFAULT 0, resume INTEGER NOT NULL DEFAULT 0
+);
+CREATE TABLE IF NOT EXISTS events (
+    job_id TEXT NOT NULL, t REAL NOT NULL, from_state TEXT NOT NULL, to_state TEXT NOT NULL,
+    reason TEXT NOT NULL
+);
+CREATE INDEX IF NOT EXISTS jobs_cell_state ON jobs (cell, state);
+"""
+
+
+@dataclass(frozen=True)
+class JobRecord:
+    """One job as stored.
+
+    Attributes:
+        id: job id. cell: cell name. state: one of ``STATES``. model: path of the model file.
+        job_file: path of the job TOML ("" = defaults). cell_file: cell TOML ("" = bundled).
+        dir: job directory (artifacts). created, updated: s since the epoch.
+        reason: one line, why it failed/stopped ("" otherwise).
+        layer, waypoint, sample: checkpoint, the last waypoint deposited (-1 = none).
+        layers, waypoints, samples: sizes of the toolpath/trajectory (0 until planned).
+        percent: 0..100 progress. eta_s: s to completion. volume: mm^3 extruded.
+        resume: 1 when a resume was requested and not yet picked up.
+    """
+
+    id: str
+    cell: str
+    state: str
+    model: str
+    job_file: str
+    cell_file: str
+    dir: str
+    created: float
+    updated: float
+    reason: str
+    layer: int
+    waypoint: int
+    sample: int
+    layers: int
+    waypoints: int
+    samples: int
+    percent: float
+    eta_s: float
+    volume: float
+    resume: int
+
+
+_COLUMNS = ", ".join(f.name for f in fields(JobRecord))
+
+
+class JobStore:
+    """Jobs in one SQLite file; safe for several processes (WAL, short transactions)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._db = sqlite3.connect(self.path, timeout=10.0, isolation_level=None,
+                                   check_same_thread=False)
+        self._db.execute("PRAGMA journal_mode=WAL")
+        self._db.execute("PRAGMA synchronous=NORMAL")
+        self._db.executescript(_SCHEMA)
+
+    def close(self) -> None:
+        """Close the connection."""
+        self._db.close()
+
+    @contextmanager
+    def _tx(self) -> Iterator[sqlite3.Connection]:
+        self._db.execute("BEGIN IMMEDIATE")
+        try:
+            yield self._db
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
+        self._db.execute("COMMIT")
+
+    # -- queries ---------------------------------------------------------------------------
+    def get(self, job_id: str) -> JobRecord:
+        """The job ``job_id``; an unknown id is an ``InputError``."""
+        row = self._db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        if row is None:
+            raise InputError(f"no job '{job_id}'", "list the jobs with `mesp job list`")
+        return JobRecord(*row)
+
+    def query(self, cell: str | None = None, states: tuple[str, ...] = ()) -> list[JobRecord]:
+        """Jobs, oldest first, optionally of one cell and in some states."""
+        sql, args = f"SELECT {_COLUMNS} FROM jobs WHERE 1=1", []
+        if cell is not None:
+            sql += " AND cell = ?"
+            args.append(cell)
+        if states:
+            sql += f" AND state IN ({','.join('?' * len(states))})"
+            args.extend(states)
+        rows = self._db.execute(sql + " ORDER BY created, id", args).fetchall()
+        return [JobRecord(*r) for r in rows]
+
+    def next_pending(self, cell: str) -> JobRecord | None:
+        """The oldest job of ``cell`` the supervisor should work on next, or None."""
+        row = self._db.execute(
+            f"SELECT {_COLUMNS} FROM jobs WHERE cell = ? AND (state IN "
+            "('submitted','sliced','planned') OR (resume = 1 AND state IN "
+            "('paused','interrupted'))) ORDER BY created, id LIMIT 1",
+            (cell,),
+        ).fetchone()
+        return JobRecord(*row) if row else None
+
+    def history(self, job_id: str) -> list[tuple[float, str, str, str]]:
+        """(t, from, to, reason) of every transition of a job, oldest first."""
+        return list(self._db.execute(
+            "SELECT t, from_state, to_state, reason FROM events WHERE job_id = ? ORDER BY rowid",
+            (job_id,),
+        ))
+
+    # -- changes ---------------------------------------------------------------------------
+    def submit(self, model: Path, cell: str, root: Path, job_file: Path | None = None,
+               cell_file: Path | None = None, job_id: str | None = None) -> JobRecord:
+        """Record a new job; its directory is ``root/<id>``. Inputs are checked by the caller."""
+        stem = re.sub(r"[^a-z0-9]+", "-", Path(model).stem.lower()).strip("-") or "job"
+        now = time.time()
+        with self._tx() as db:
+            if job_id is None:
+                n = db.execute("SELECT COUNT(*) FROM jobs").fetchone()[0] + 1
+                job_id = f"{stem}-{n:04d}"
+                while db.execute("SELECT 1 FROM jobs WHERE id = ?", (job_id,)).fetchone():
+                    n += 1
+                    job_id = f"{stem}-{n:04d}"
+            elif db.execute("SELECT 1 FROM jobs WHERE id = ?", (job_id,)).fetchone():
+                raise InputError(f"job '{job_id}' already exists", "choose another id")
+            job_dir = Path(root) / job_id
+            db.execute(
+                "INSERT INTO jobs (id, cell, state, model, job_file, cell_file, dir, created, "
+                "updated) VALUES (?, ?, 'submitted', ?, ?, ?, ?, ?, ?)",
+                (job_id, cell, str(Path(model).resolve()),
+                 str(Path(job_file).resolve()) if job_file else "",
+                 str(Path(cell_file).resolve()) if cell_file else "", str(job_dir), now, now),
+            )
+            db.execute("INSERT INTO events VALUES (?, ?, '', 'submitted', '')", (job_id, now))
+        job_dir.mkdir(parents=True, exist_ok=True)
+        return self.get(job_id)
+
+    def check_transition(self, job: JobRecord, new_state: str) -> str:
+        """'' if ``job`` may go to ``new_state``, else the one-line reason it may not."""
+        if new_state not in STATES:
+            return f"'{new_state}' is not a job state"
+        if new_state in TRANSITIONS[job.state]:
+            return ""
+        if job.state in FINAL:
+            return f"job {job.id} is {job.state}; a finished job cannot become {new_state}"
+        allowed = ", ".join(sorted(TRANSITIONS[job.state]))
+        return f"job {job.id} is {job.state}; it can become only {allowed}, not {new_state}"
+
+    def transition(self, job_id: str, new_state: str, reason: str = "",
+                   expect: str | None = None) -> JobRecord:
+        """Move a job to ``new_state``; an invalid move raises ``InputError`` with the reason.
+
+        ``expect`` makes the move conditional on the current state (a race is refused too).
+        """
+        reason = " ".join(reason.split())
+        with self._tx() as db:
+            row = db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            if row is None:
+                raise InputError(f"no job '{job_id}'", "list the jobs with `mesp job list`")
+            job = JobRecord(*row)
+            if expect is not None and job.state != expect:
+                raise InputError(f"job {job_id} is {job.state}, not {expect}", "check its status")
+            why = self.check_transition(job, new_state)
+            if why:
+                raise InputError(why, "see `mesp job status`")
+            now = time.time()
+            resume = 0 if new_state == "printing" else job.resume
+            db.execute("UPDATE jobs SET state = ?, reason = ?, updated = ?, resume = ? "
+                       "WHERE id = ?", (new_state, reason, now, resume, job_id))
+            db.execute("INSERT INTO events VALUES (?, ?, ?, ?, ?)",
+                       (job_id, now, job.state, new_state, reason))
+        return self.get(job_id)
+
+    def request_resume(self, job_id: str) -> JobRecord:
+        """Flag a paused or interrupted job for the supervisor to resume."""
+        job = self.get(job_id)
+        if job.state not in ("paused", "interrupted"):
+            raise InputError(f"job {job_id} is {job.state}; only a paused or interrupted job "
+                             "can be resumed", "see `mesp job status`")
+        with self._tx() as db:
+            db.execute("UPDATE jobs SET resume = 1, updated = ? WHERE id = ?",
+                       (time.time(), job_id))
+        return self.get(job_id)
+
+    def set_sizes(self, job_id: str, layers: int, waypoints: int, samples: int) -> None:
+        """Record the toolpath/trajectory sizes once planned."""
+        with self._tx() as db:
+            db.execute("UPDATE jobs SET layers = ?, waypoints = ?, samples = ?, updated = ? "
+                       "WHERE id = ?", (layers, waypoints, samples, time.time(), job_id))
+
+    def checkpoint(self, job_id: str, layer: int, waypoint: int, sample: int) -> None:
+        """Record the last deposited waypoint; the checkpoint only moves forward."""
+        with self._tx() as db:
+            db.execute("UPDATE jobs SET layer = ?, waypoint = ?, sample = ?, updated = ? "
+                       "WHERE id = ? AND sample <= ?",
+                       (layer, waypoint, sample, time.time(), job_id, sample))
+
+    def progress(self, job_id: str, percent: float, eta_s: float, volume: float) -> None:
+        """Record live progress (percent of samples, s to go, mm^3 extruded)."""
+        with self._tx() as db:
+            db.execute("UPDATE jobs SET percent = ?, eta_s = ?, volume = ?, updated = ? "
+                       "WHERE id = ?", (percent, eta_s, volume, time.time(), job_id))
+
+
+MODEL_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf", ".msh", ".vtk", ".vtu", ".mesh")
+
+
+def check_submission(model: Path, job_file: Path | None = None,
+                     cell_file: Path | None = None) -> None:
+    """Refuse a job before anything is queued or moves: a one-line ``InputError`` each for a
+    missing/unsupported model, a malformed job file, or a malformed cell file."""
+    model = Path(model)
+    if not model.is_file():
+        raise InputError(f"model {model} does not exist", "check the path")
+    if model.suffix.lower() not in MODEL_SUFFIXES:
+        raise InputError(f"model {model} has an unsupported type '{model.suffix}'",
+                         f"use one of {', '.join(MODEL_SUFFIXES)}")
+    if model.stat().st_size == 0:
+        raise InputError(f"model {model} is empty", "export it again")
+    if job_file is not None:
+        from slicer.config import load_job
+
+        load_job(Path(job_file))
+    if cell_file is not None:
+        from planner.cell import load_cell
+
+        load_cell(Path(cell_file))

@@ -1,0 +1,68 @@
+"""Thin adapters from the slicer/planner nodes to the library functions.
+
+A node calls ``slice_job`` / ``plan_job`` here; each can be replaced by a function named
+``"module:function"`` in the node's parameters (``slice_fn``/``plan_fn``) with the same
+signature, which the tests use to run the cell on synthetic artifacts.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from slicer.errors import InputError
+
+SliceFn = Callable[[Path, Path | None, Path], dict[str, Any]]
+PlanFn = Callable[[Path, Path | None], dict[str, Any]]
+
+
+def resolve(spec: str) -> Callable[..., dict[str, Any]]:
+    """The function named ``"package.module:function"``."""
+    module, _, name = spec.partition(":")
+    if not module or not name:
+        raise InputError(f"'{spec}' does not name a function", "write it as module:function")
+    try:
+        fn = getattr(importlib.import_module(module), name)
+    except (ImportError, AttributeError) as exc:
+        raise InputError(f"cannot load {spec} ({exc})", "check the launch file") from exc
+    return fn
+
+
+def slice_job(model: Path, job_file: Path | None, out_dir: Path) -> dict[str, Any]:
+    """Slice ``model`` with the job file (None = defaults) into ``out_dir``; the report."""
+    from slicer import pipeline
+    from slicer.config import load_job
+
+    model = Path(model)
+    if not model.is_file():
+        raise InputError(f"model {model} does not exist", "check the path")
+    job = load_job(Path(job_file) if job_file else None)
+    fn = getattr(pipeline, "slice_job", None) or pipeline.slice_model
+    report: dict[str, Any] = fn(model, Path(out_dir), job)
+    return report
+
+
+def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
+    """Plan ``job_dir/toolpath.npz`` in the cell (None = bundled); writes trajectory.npz.
+
+    A plan that does not reach every waypoint or breaks a limit is refused with its status,
+    so nothing moves.
+    """
+    from planner.cell import load_cell
+    from planner.plan import plan
+    from slicer.report import update_report
+    from slicer.stages import Toolpath
+
+    job_dir = Path(job_dir)
+    toolpath = Toolpath.load(job_dir)
+    cell = load_cell(Path(cell_file) if cell_file else None)
+    result = plan(toolpath, cell)
+    if result.status != "ok":
+        count = result.report.get("unreachable", {}).get("count", "")
+        raise InputError(f"plan refused: {result.status}" + (f" ({count})" if count else ""),
+                         "move the model (cell [placement]) or change the job")
+    result.trajectory.save(job_dir)
+    update_report(job_dir, {"plan": result.report})
+    return result.report

@@ -1,0 +1,170 @@
+"""The extruder node: owns the extruder driver (Modbus TCP or serial) and publishes its state.
+
+Commands (``extruder/cmd``): ``start`` (args ``rate`` mm^3/s), ``set_rate``, ``stop``,
+``reset`` (all latched faults), ``clear`` (latched faults except an e-stop), ``estop``.
+A poll loop at ``state_hz`` feeds the controller watchdog, reads the
+controller and publishes ``ExtruderState``. Interlocks: the motor stops when the robot or the
+supervisor process disappears or an e-stop arrives; a link failure (after the driver's retries)
+is published as ``FAULT_LINK`` and the motor is commanded off as soon as the link returns.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from mesp_cell.drivers.extruder_base import ExtruderDriver, ExtruderLinkError
+from mesp_cell.messages import FAULT_ESTOP, FAULT_LINK, Command, EStop, ExtruderState, Reply
+from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
+
+log = logging.getLogger("mesp.extruder")
+
+
+def make_extruder(params: dict[str, Any]) -> ExtruderDriver:
+    """The driver named by ``params['driver']``: "modbus" (default) or "serial"."""
+    kind = params.get("driver", "modbus")
+    if kind == "modbus":
+        from mesp_cell.drivers.extruder_modbus import ModbusExtruder
+
+        return ModbusExtruder(str(params.get("host", "127.0.0.1")), int(params["port"]),
+                              timeout=float(params.get("timeout_s", 0.2)),
+                              retries=int(params.get("retries", 3)),
+                              retry_delay=float(params.get("retry_delay_s", 0.05)),
+                              watchdog_ms=int(params.get("watchdog_ms", 500)))
+    if kind == "serial":
+        from mesp_cell.drivers.extruder_serial import SerialExtruder
+
+        return SerialExtruder(str(params["url"]), timeout=float(params.get("timeout_s", 0.2)),
+                              retries=int(params.get("retries", 3)))
+    raise ValueError(f"unknown extruder driver '{kind}' (modbus, serial)")
+
+
+class ExtruderNode(LifecycleNode):
+    """See the module docstring. Parameters: driver, host, port (or url), retries, timeout_s,
+    retry_delay_s, watchdog_ms, state_hz (100), robot and supervisor (node names)."""
+
+    def on_configure(self) -> None:
+        p = self.params
+        self.driver = make_extruder(p)
+        self.robot_name = p.get("robot", "robot")
+        self.supervisor_name = p.get("supervisor", "supervisor")
+        self.period = 1.0 / float(p.get("state_hz", 100.0))
+        self.lock = threading.Lock()
+        self.connected = False
+        self.detail = ""
+        self.want_stop = False
+        self._seq = 0
+        try:
+            with self.lock:
+                self.driver.connect()
+                self.driver.stop()
+            self.connected = True
+        except ExtruderLinkError as exc:
+            self.detail = str(exc)
+            log.error("%s", exc)
+
+    def on_activate(self) -> None:
+        assert self.bus is not None
+        self.bus.subscribe("estop", "estop", EStop, self._on_estop)
+        self.bus.watch_presence(self._on_presence)
+        self.bus.serve(self._on_command)
+        self.spawn(self._poll, "poll")
+
+    def on_deactivate(self) -> None:
+        self._safe_stop("extruder node shutting down")
+
+    def on_shutdown(self) -> None:
+        self.driver.close()
+
+    # -- safety ----------------------------------------------------------------------------
+    def _safe_stop(self, why: str, estop: bool = False) -> None:
+        log.warning("stopping the extruder: %s", why)
+        try:
+            with self.lock:
+                self.driver.estop() if estop else self.driver.stop()
+            self.want_stop = False
+        except ExtruderLinkError as exc:
+            self.want_stop = True  # commanded off as soon as the link returns
+            self.detail = str(exc)
+
+    def _on_presence(self, node: str, alive: bool) -> None:
+        if not alive and node in (self.robot_name, self.supervisor_name):
+            self._safe_stop(f"{node} process lost")
+
+    def _on_estop(self, msg: EStop) -> None:
+        self._safe_stop(f"e-stop from {msg.source}", estop=True)
+
+    # -- commands --------------------------------------------------------------------------
+    def _on_command(self, cmd: Command) -> Reply:
+        verb = cmd.verb
+        try:
+            with self.lock:
+                if verb == "start":
+                    rate = float(cmd.arg("rate", 6.57))
+                    if not 0 < rate <= 1000:
+                        return Reply.refuse(f"rate {rate} mm^3/s outside (0, 1000]")
+                    self.driver.start(rate)
+                elif verb == "set_rate":
+                    self.driver.set_rate(float(cmd.arg("rate")))
+                elif verb == "stop":
+                    self.driver.stop()
+                elif verb == "reset":
+                    self.driver.reset()
+                    self.detail = ""
+                elif verb == "clear":
+                    # Clear a latched watchdog/stall fault before a (re)start; an e-stop is
+                    # cleared only by the operator's reset.
+                    fault = self.driver.read().fault
+                    if fault & FAULT_ESTOP:
+                        return Reply.refuse("e-stop latched on the extruder; reset it with "
+                                            "`mesp estop --reset`")
+                    if fault:
+                        self.driver.reset()
+                elif verb == "estop":
+                    self.driver.estop()
+                else:
+                    return Reply.refuse(f"unknown extruder command '{verb}'")
+        except ExtruderLinkError as exc:
+            return Reply.refuse(str(exc))
+        return Reply.done()
+
+    # -- poll loop -------------------------------------------------------------------------
+    def _poll(self) -> None:
+        next_t = time.monotonic()
+        while not self.stopping.is_set() and self.bus is not None:
+            self._seq += 1
+            try:
+                with self.lock:
+                    if self.want_stop:
+                        self.driver.stop()
+                        self.want_stop = False
+                    self.driver.heartbeat()
+                    r = self.driver.read()
+                self.connected = True
+                msg = ExtruderState(time.time(), self._seq, r.rate_set, r.rate, r.volume,
+                                    r.running, True, r.fault,
+                                    "" if not r.fault else f"controller fault bits {r.fault:#x}")
+            except ExtruderLinkError as exc:
+                if self.connected:
+                    log.error("%s", exc)
+                self.connected, self.detail, self.want_stop = False, str(exc), True
+                msg = ExtruderState(time.time(), self._seq, 0.0, 0.0, 0.0, False, False,
+                                    FAULT_LINK, self.detail)
+            self.bus.publish("state", msg)
+            next_t += self.period
+            delay = next_t - time.monotonic()
+            if delay < -1.0:  # after a long retry, do not try to catch up
+                next_t = time.monotonic()
+            time.sleep(max(0.0, delay))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Process entry point."""
+    return node_main(ExtruderNode, argv, "extruder")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

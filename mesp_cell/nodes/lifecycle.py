@@ -1,0 +1,152 @@
+"""The lifecycle every node shares: states, heartbeat, presence, signals.
+
+States follow the managed-node pattern: unconfigured -> (configure) -> inactive -> (activate)
+-> active -> (deactivate) -> inactive -> (shutdown) -> finalized. ``configure`` opens the bus
+and the devices, ``activate`` starts publishing and serving, ``deactivate`` makes the node's
+devices safe (motion and extrusion stop), ``shutdown`` closes everything.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from typing import Any
+
+from mesp_cell.bus.session import Bus, BusConfig
+from mesp_cell.messages import Heartbeat
+
+log = logging.getLogger("mesp")
+
+
+class LifecycleNode:
+    """Base class of a node process. Subclasses override the ``on_*`` hooks."""
+
+    heartbeat_s = 0.5
+
+    def __init__(self, name: str, bus_config: BusConfig, params: dict[str, Any]) -> None:
+        self.name = name
+        self.bus_config = bus_config
+        self.params = params
+        self.state = "unconfigured"
+        self.bus: Bus | None = None
+        self.stopping = threading.Event()
+        self._seq = 0
+        self._threads: list[threading.Thread] = []
+
+    # -- hooks -----------------------------------------------------------------------------
+    def on_configure(self) -> None:
+        """Open devices (the bus is already open)."""
+
+    def on_activate(self) -> None:
+        """Start serving and publishing."""
+
+    def on_deactivate(self) -> None:
+        """Make devices safe."""
+
+    def on_shutdown(self) -> None:
+        """Release devices."""
+
+    # -- transitions -----------------------------------------------------------------------
+    def configure(self) -> None:
+        assert self.state == "unconfigured"
+        self.bus = Bus(self.bus_config, self.name)
+        self.on_configure()
+        self.state = "inactive"
+
+    def activate(self) -> None:
+        assert self.state == "inactive" and self.bus is not None
+        self.on_activate()
+        self.state = "active"
+        self.bus.announce()  # presence only once the node can do its job
+        self.spawn(self._heartbeat, "heartbeat")
+
+    def deactivate(self) -> None:
+        if self.state == "active":
+            self.state = "inactive"
+            self.on_deactivate()
+
+    def shutdown(self) -> None:
+        self.deactivate()
+        self.stopping.set()
+        try:
+            self.on_shutdown()
+        finally:
+            if self.bus is not None:
+                self.bus.close()
+            self.state = "finalized"
+
+    # -- helpers ---------------------------------------------------------------------------
+    def spawn(self, target: Any, name: str) -> threading.Thread:
+        """Start a daemon thread that belongs to this node."""
+        t = threading.Thread(target=target, name=f"{self.name}-{name}", daemon=True)
+        t.start()
+        self._threads.append(t)
+        return t
+
+    def _heartbeat(self) -> None:
+        while not self.stopping.wait(self.heartbeat_s):
+            if self.bus is None:
+                return
+            self._seq += 1
+            self.bus.publish("heartbeat", Heartbeat(self.name, self.state, self._seq, os.getpid(),
+                                                    time.time()), express=False)
+
+    def run(self) -> int:
+        """Configure, activate, serve until SIGINT/SIGTERM, then deactivate and shut down."""
+
+        def on_signal(signum: int, frame: object) -> None:
+            self.stopping.set()
+
+        signal.signal(signal.SIGTERM, on_signal)
+        signal.signal(signal.SIGINT, on_signal)
+        watch_parent(self.stopping)
+        try:
+            self.configure()
+            self.activate()
+            log.info("%s active (pid %d)", self.name, os.getpid())
+            while not self.stopping.wait(0.2):
+                pass
+        finally:
+            self.shutdown()
+            log.info("%s finalized", self.name)
+        return 0
+
+
+def watch_parent(stop: threading.Event) -> None:
+    """Set ``stop`` if the launcher that started this process dies (it is reparented).
+
+    Only when started by ``mesp launch`` (``MESP_LAUNCHER_PID`` names the parent), so a crashed
+    launcher never leaves devices driven by orphans.
+    """
+    launcher = int(os.environ.get("MESP_LAUNCHER_PID", "0") or 0)
+    if launcher <= 0 or os.getppid() != launcher:
+        return
+
+    def watch() -> None:
+        while not stop.wait(0.5):
+            if os.getppid() != launcher:
+                log.error("launcher (pid %d) is gone: shutting down", launcher)
+                stop.set()
+                return
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
+def node_main(cls: type[LifecycleNode], argv: Sequence[str] | None, default_name: str) -> int:
+    """Shared ``main``: parse ``--name --bus --params`` and run the node."""
+    ap = argparse.ArgumentParser(prog=default_name)
+    ap.add_argument("--name", default=default_name)
+    ap.add_argument("--bus", default=BusConfig().to_json(), help="bus config, JSON")
+    ap.add_argument("--params", default="{}", help="node parameters, JSON")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, stream=sys.stderr,
+                        format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    node = cls(args.name, BusConfig.from_json(args.bus), json.loads(args.params))
+    return node.run()

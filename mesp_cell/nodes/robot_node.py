@@ -1,0 +1,360 @@
+"""The robot node: owns the arm driver (UR5e over RTDE, or a twin) and streams trajectories.
+
+Commands (``robot/cmd``): ``load`` (path, sha256 of trajectory.npz) checks and resamples a
+trajectory; ``move`` (args ``to``: "home" | "sample", ``sample``) moves point-to-point;
+``stream`` (args ``start``, ``after_waypoint``, ``lead_s``, ``rate``) streams from a sample and
+switches the extruder ``lead_s`` ahead of every change of deposition, on the servo clock (lead
+compensation of the extruder's flow response); ``stop``; ``reset`` clears a latched e-stop.
+Motions run in one motion thread; their end is published as a ``StreamEvent`` on
+``robot/event``. Interlocks, checked before every servo sample: no e-stop,
+the extruder and supervisor processes present, and the extruder running (fresh state) wherever
+the trajectory deposits. Losing the extruder's liveliness token stops the stream at once.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from mesp_cell.drivers.robot_base import RobotDriver, ServoConfig
+from mesp_cell.drivers.stream import ServoStream, StreamPlan, StreamResult
+from mesp_cell.messages import (
+    Command,
+    EStop,
+    ExtruderState,
+    Reply,
+    RobotState,
+    StreamEvent,
+    WaypointReached,
+)
+from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
+
+log = logging.getLogger("mesp.robot")
+
+
+def make_driver(params: dict[str, Any], servo: ServoConfig) -> RobotDriver:
+    """The driver named by ``params['backend']``: "twin" (default), "mujoco" or "ur5e"."""
+    backend = params.get("backend", "twin")
+    home = np.radians(params.get("home_deg", [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]))
+    tool = params.get("tool_T")
+    tool_T = None if tool is None else np.asarray(tool, dtype=np.float64)
+    if backend == "twin":
+        from mesp_cell.drivers.robot_twin import KinematicTwin
+
+        return KinematicTwin(servo, q0=home, tool_T=tool_T)
+    if backend == "mujoco":
+        from mesp_cell.drivers.robot_twin import mujoco_twin
+
+        return mujoco_twin(servo, q0=home, tool_T=tool_T, cell_file=cell_file_of(params))
+    if backend == "ur5e":
+        from mesp_cell.drivers.ur5e_rtde import UR5eRTDE
+
+        return UR5eRTDE(str(params["host"]), servo, tool_T=tool_T)
+    raise ValueError(f"unknown robot backend '{backend}' (twin, mujoco, ur5e)")
+
+
+def cell_file_of(params: dict[str, Any]) -> str | None:
+    """The cell file of the MuJoCo backend (None = the bundled cell)."""
+    cell = params.get("cell_file")
+    return str(cell) if cell else None
+
+
+def must_run_mask(extrude: np.ndarray, lead_n: int, margin_n: int, start: int) -> np.ndarray:
+    """Samples at which the extruder must already be running.
+
+    The supervisor switches the extruder ``lead_n`` samples ahead of each change of
+    ``extrude``; a deposition sample needs the motor on unless its switch-on was less than
+    ``margin_n`` samples ago (command latency) or its switch-off lead has begun.
+
+    Args:
+        extrude: (K,) bool. Returns (K,) bool.
+    """
+    K = extrude.shape[0]
+    idx = np.arange(K)
+    cmd_on = extrude[np.minimum(idx + lead_n, K - 1)]
+    before = idx - margin_n
+    settled = np.where(before >= start, cmd_on[np.clip(before, 0, K - 1)], True)
+    return np.asarray(extrude & cmd_on & settled)
+
+
+class RobotNode(LifecycleNode):
+    """See the module docstring. Parameters: backend, host, servo (table), home_deg, tool_T,
+    state_hz (100), extruder (node name), supervisor (node name), extruder_fresh_s (0.05: max age
+    of the extruder state), switch_margin_s (0.1: time allowed for a switch-on to show)."""
+
+    def on_configure(self) -> None:
+        p = self.params
+        self.servo = ServoConfig(**p.get("servo", {}))
+        self.driver = make_driver(p, self.servo)
+        self.driver.connect()
+        self.home = np.radians(p.get("home_deg", [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]))
+        self.extruder_name = p.get("extruder", "extruder")
+        self.supervisor_name = p.get("supervisor", "supervisor")
+        self.fresh_s = float(p.get("extruder_fresh_s", 0.05))
+        self.margin_s = float(p.get("switch_margin_s", 0.1))
+        self._switches: queue.Queue[tuple[str, float]] = queue.Queue()
+        self.state_period = 1.0 / float(p.get("state_hz", 100.0))
+        self.alive: set[str] = set()
+        self.estopped = ""
+        self.plan: StreamPlan | None = None
+        self.job_id = ""
+        self.stream: ServoStream | None = None
+        self.mode = "idle"
+        self.stop_reason, self.stop_t = "", 0.0
+        self.waypoint = -1
+        self._ext: ExtruderState | None = None
+        self._ext_t = 0.0
+        self._motion_lock = threading.Lock()
+        self._motion: threading.Thread | None = None
+        self._abort_move = threading.Event()
+        self._in_motion = threading.Event()
+        self._seq = 0
+
+    def on_activate(self) -> None:
+        assert self.bus is not None
+        self.bus.subscribe(self.extruder_name, "state", ExtruderState, self._on_extruder)
+        self.bus.subscribe("estop", "estop", EStop, self._on_estop)
+        self.bus.watch_presence(self._on_presence)
+        self.bus.serve(self._on_command)
+        self.spawn(self._publish_state, "state")
+        self.spawn(self._switcher, "switcher")
+
+    def _switcher(self) -> None:
+        """Send extruder switch commands off the servo thread (a request takes a few ms)."""
+        while not self.stopping.is_set():
+            try:
+                verb, rate = self._switches.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            if self.bus is not None:
+                reply = self.bus.request(self.extruder_name, Command.make(verb, rate=rate), 1.0)
+                if not reply.ok:
+                    log.warning("extruder %s refused: %s", verb, reply.reason)
+
+    def on_deactivate(self) -> None:
+        self._halt("robot node shutting down")
+
+    def on_shutdown(self) -> None:
+        if self._motion is not None:
+            self._motion.join(2.0)
+        self.driver.close()
+
+    # -- inputs ----------------------------------------------------------------------------
+    def _on_extruder(self, msg: ExtruderState) -> None:
+        self._ext, self._ext_t = msg, time.monotonic()
+
+    def _on_presence(self, node: str, alive: bool) -> None:
+        if alive:
+            self.alive.add(node)
+            return
+        self.alive.discard(node)
+        if node in (self.extruder_name, self.supervisor_name):
+            self._halt(f"{node} process lost")
+
+    def _on_estop(self, msg: EStop) -> None:
+        self.estopped = f"e-stop from {msg.source}" + (f": {msg.reason}" if msg.reason else "")
+        self._halt(self.estopped)
+
+    def _halt(self, reason: str) -> None:
+        stream = self.stream
+        if stream is not None:
+            stream.stop(reason)
+        self._abort_move.set()
+
+    # -- interlocks ------------------------------------------------------------------------
+    def _guard_factory(self, plan: StreamPlan, start: int, lead_s: float) -> Any:
+        must = must_run_mask(plan.extrude, self._samples(lead_s, plan), self._samples(
+            self.margin_s, plan), start)
+
+        def guard(k: int) -> str:
+            if self.estopped:
+                return self.estopped
+            if self.extruder_name not in self.alive:
+                return f"{self.extruder_name} process lost"
+            if self.supervisor_name not in self.alive:
+                return f"{self.supervisor_name} process lost"
+            if must[k]:
+                ext, age = self._ext, time.monotonic() - self._ext_t
+                if ext is None or age > self.fresh_s:
+                    return f"no extruder state for {age * 1000:.0f} ms"
+                if ext.fault:
+                    return f"extruder fault {ext.fault:#x}: {ext.detail}"
+                if not ext.running:
+                    return "extruder not running where the trajectory deposits"
+            return ""
+
+        return guard
+
+    def _samples(self, seconds: float, plan: StreamPlan) -> int:
+        """Servo samples spanning ``seconds`` of wall time (a fast twin runs more per second):
+        the extruder's flow response and the command latency are wall-clock."""
+        return round(seconds * self.servo.time_scale / plan.dt)
+
+    # -- commands --------------------------------------------------------------------------
+    def _on_command(self, cmd: Command) -> Reply:
+        verb = cmd.verb
+        if verb == "stop":
+            self._halt(cmd.arg("reason", "stop requested"))
+            return Reply.done()
+        if verb == "reset":
+            self.estopped = ""
+            return Reply.done()
+        if verb == "load":
+            if self._busy():
+                return Reply.refuse("robot is busy; stop it first")
+            plan = StreamPlan.load(Path(cmd.path), self.servo.dt, cmd.sha256)
+            self.plan, self.job_id = plan, cmd.job_id
+            return Reply.done(samples=plan.samples, layers=plan.layers,
+                              waypoints=int(plan.wp_id.size), duration_s=plan.samples * plan.dt)
+        if verb in ("move", "stream"):
+            if self.estopped:
+                return Reply.refuse(f"{self.estopped}; reset it with `mesp estop --reset`")
+            if not self.driver.connected() or self.driver.protective_stopped():
+                return Reply.refuse("robot not ready (link down or protective stop)")
+            if self._busy():
+                return Reply.refuse("robot is busy with another motion")
+            if verb == "move":
+                return self._start_move(cmd)
+            return self._start_stream(cmd)
+        return Reply.refuse(f"unknown robot command '{verb}'")
+
+    def _busy(self) -> bool:
+        # A flag, not the thread's liveness: the motion is over once its end event is out,
+        # even if its thread has not returned yet.
+        return self._in_motion.is_set()
+
+    def _start_move(self, cmd: Command) -> Reply:
+        to = cmd.arg("to", "home")
+        if to == "home":
+            target = self.home
+        elif to == "sample":
+            if self.plan is None:
+                return Reply.refuse("no trajectory loaded")
+            k = int(cmd.arg("sample", 0))
+            if not 0 <= k < self.plan.samples:
+                return Reply.refuse(f"sample {k} outside the trajectory")
+            target = self.plan.q[k]
+        else:
+            return Reply.refuse(f"unknown move target '{to}'")
+        self._abort_move.clear()
+
+        def run() -> None:
+            self.mode = "moving"
+            log.info("move of %s to %s", cmd.job_id, to)
+            ok, why = False, "move interrupted"
+            try:
+                ok = self.driver.move_j(target) and not self._abort_move.is_set()
+            except Exception as exc:  # the end event must go out whatever happened
+                log.exception("move failed")
+                why = f"move failed: {exc}"
+            finally:
+                self.mode = "idle" if ok else "stopped"
+                self._in_motion.clear()
+            log.info("move of %s to %s %s", cmd.job_id, to, "done" if ok else why)
+            self._event(StreamEvent(cmd.job_id, "moved" if ok else "stopped",
+                                    "" if ok else why, -1, time.time()))
+
+        self._in_motion.set()
+        self._motion = self.spawn(run, "move")
+        return Reply.done()
+
+    def _start_stream(self, cmd: Command) -> Reply:
+        plan = self.plan
+        if plan is None or cmd.job_id != self.job_id:
+            return Reply.refuse(f"trajectory of job '{cmd.job_id}' is not loaded")
+        start = int(cmd.arg("start", 0))
+        after = int(cmd.arg("after_waypoint", -1))
+        lead_s = float(cmd.arg("lead_s", 0.0))
+        rate = float(cmd.arg("rate", 6.57))
+        guard = self._guard_factory(plan, start, lead_s)
+        lead_n = self._samples(lead_s, plan)
+        K = plan.samples
+        cmd_on = plan.extrude[np.minimum(np.arange(K) + lead_n, K - 1)]
+        switched = {"on": bool(cmd_on[start])}
+
+        def on_sample(k: int) -> None:
+            # Lead compensation on the servo clock: switch lead_n samples ahead.
+            if bool(cmd_on[k]) != switched["on"]:
+                switched["on"] = bool(cmd_on[k])
+                self._switches.put(("start" if switched["on"] else "stop", rate))
+
+        why = guard(start)
+        if why:
+            return Reply.refuse(why)
+        assert self.bus is not None
+        bus, job = self.bus, cmd.job_id
+
+        def on_waypoint(i: int) -> None:
+            self.waypoint = int(plan.wp_id[i])
+            bus.publish("waypoint", WaypointReached(job, self.waypoint, int(plan.wp_layer[i]),
+                                                    int(plan.wp_sample[i]), time.time()),
+                        express=True)
+
+        stream = ServoStream(self.driver, plan, start, guard, on_sample=on_sample,
+                             on_waypoint=on_waypoint, after_waypoint=after)
+        self.stream = stream
+        self.stop_reason = ""
+
+        def run() -> None:
+            self.mode = "streaming"
+            try:
+                result = stream.run()
+            except Exception as exc:  # the end event must go out whatever happened
+                log.exception("stream failed")
+                self.driver.servo_stop()
+                result = StreamResult(False, f"stream failed: {exc}", stream.sample, time.time(),
+                                      np.zeros(0))
+            self.stop_reason, self.stop_t = result.reason, result.stop_t
+            self.mode = "idle" if result.done else "stopped"
+            if result.reason:
+                log.warning("stream of %s stopped at sample %d: %s", job, result.last_sample,
+                            result.reason)
+            self._in_motion.clear()
+            self._event(StreamEvent(job, "done" if result.done else "stopped", result.reason,
+                                    result.last_sample, result.stop_t))
+
+        self._in_motion.set()
+        self._motion = self.spawn(run, "stream")
+        return Reply.done()
+
+    # -- outputs ---------------------------------------------------------------------------
+    def _event(self, ev: StreamEvent) -> None:
+        if self.bus is not None:
+            self.bus.publish("event", ev, express=True)
+
+    def _publish_state(self) -> None:
+        next_t = time.monotonic()
+        while not self.stopping.is_set() and self.bus is not None:
+            d = self.driver
+            q, qd = np.degrees(d.joints()), np.degrees(d.joint_speeds())
+            stream, plan = self.stream, self.plan
+            self._seq += 1
+            mode = "fault" if (not d.connected() or d.protective_stopped()) else self.mode
+            self.bus.publish("state", RobotState(
+                time.time(), self._seq, tuple(q.tolist()), tuple(qd.tolist()),
+                tuple(d.tcp_mm().tolist()), mode, self.job_id,
+                stream.sample if stream is not None else -1,
+                plan.samples if plan is not None else 0, self.waypoint, d.connected(),
+                d.protective_stopped(), self.stop_reason, self.stop_t))
+            if d.connected():
+                d.kick_watchdog()
+            elif not self._busy():
+                d.reconnect()
+            next_t += self.state_period
+            time.sleep(max(0.0, next_t - time.monotonic()))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Process entry point."""
+    return node_main(RobotNode, argv, "robot")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,346 @@
+"""The supervisor: takes jobs from the store and sequences them through the cell.
+
+submitted -> (slicer node) sliced -> (planner node) planned -> pre-flight (the robot node
+loads and checks the trajectory; a refusal fails the job before anything moves) -> print:
+home, approach the start sample, prime and start extrusion ``lead_s`` ahead of deposition
+(lead compensation of the extruder's flow response), stream the trajectory (the robot node
+switches the extruder ``lead_s`` ahead of every change of ``extrude``, on the servo clock),
+record a checkpoint at every deposited waypoint, publish progress, stop the extruder, park.
+A stream that stops early (node lost, fault, e-stop) leaves the job ``interrupted`` with its
+checkpoint; ``resume`` restarts from it. Commands (``supervisor/cmd``): ``pause``,
+``resume``, ``abort`` (job_id).
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from mesp_cell.drivers.stream import StreamPlan, sha256_of
+from mesp_cell.jobs import JobRecord, JobStore
+from mesp_cell.messages import (
+    Command,
+    ExtruderState,
+    JobProgress,
+    Reply,
+    RobotState,
+    StreamEvent,
+    WaypointReached,
+)
+from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
+from slicer.errors import InputError
+
+log = logging.getLogger("mesp.supervisor")
+
+
+class Stopped(Exception):
+    """The print stopped early; ``args[0]`` is the reason."""
+
+
+class SupervisorNode(LifecycleNode):
+    """See the module docstring. Parameters: jobs_db, rate (mm^3/s), lead_s, prime_s, dt,
+    time_scale (of the twin, for the ETA),
+    robot/extruder/slicer/planner (node names), slice_timeout_s, plan_timeout_s, move_timeout_s,
+    poll_s."""
+
+    def on_configure(self) -> None:
+        p = self.params
+        self.store = JobStore(Path(p["jobs_db"]))
+        self.cell = self.bus_config.cell
+        self.rate = float(p.get("rate", 6.57))
+        self.lead_s = float(p.get("lead_s", 0.3))
+        self.prime_s = float(p.get("prime_s", 0.5))
+        self.dt = float(p.get("dt", 0.002))
+        self.time_scale = float(p.get("time_scale", 1.0))  # the twin's speed-up (ETA only)
+        self.names = {k: p.get(k, k) for k in ("robot", "extruder", "slicer", "planner")}
+        self.timeouts = {"slice": float(p.get("slice_timeout_s", 3600.0)),
+                         "plan": float(p.get("plan_timeout_s", 3600.0)),
+                         "move": float(p.get("move_timeout_s", 120.0))}
+        self.poll_s = float(p.get("poll_s", 0.1))
+        self.alive: set[str] = set()
+        self.events: queue.Queue[StreamEvent] = queue.Queue()
+        self.waypoints: queue.Queue[WaypointReached] = queue.Queue()
+        self.robot_state: RobotState | None = None
+        self.extruder_state: ExtruderState | None = None
+        self.current = ""
+        self.request = ""  # "pause" | "abort" for the current job
+        self._lock = threading.Lock()
+        for job in self.store.query(self.cell, ("printing",)):
+            self.store.transition(job.id, "interrupted", "supervisor restarted mid-print")
+
+    def on_activate(self) -> None:
+        assert self.bus is not None
+        r = self.names["robot"]
+        self.bus.subscribe(r, "event", StreamEvent, self.events.put)
+        self.bus.subscribe(r, "waypoint", WaypointReached, self.waypoints.put)
+        self.bus.subscribe(r, "state", RobotState, self._on_robot)
+        self.bus.subscribe(self.names["extruder"], "state", ExtruderState, self._on_extruder)
+        self.bus.watch_presence(self._on_presence)
+        self.bus.serve(self._on_command)
+        self.spawn(self._work, "work")
+
+    def on_deactivate(self) -> None:
+        with self._lock:
+            if self.current:
+                self.request = "shutdown"
+
+    def on_shutdown(self) -> None:
+        self.store.close()
+
+    # -- inputs ----------------------------------------------------------------------------
+    def _on_robot(self, msg: RobotState) -> None:
+        self.robot_state = msg
+
+    def _on_extruder(self, msg: ExtruderState) -> None:
+        self.extruder_state = msg
+
+    def _on_presence(self, node: str, alive: bool) -> None:
+        (self.alive.add if alive else self.alive.discard)(node)
+
+    def _on_command(self, cmd: Command) -> Reply:
+        job = self.store.get(cmd.job_id)
+        if job.cell != self.cell:
+            return Reply.refuse(f"job {job.id} belongs to cell '{job.cell}', not '{self.cell}'")
+        if cmd.verb == "resume":
+            self.store.request_resume(job.id)
+            return Reply.done(state=job.state)
+        if cmd.verb in ("pause", "abort"):
+            with self._lock:
+                if self.current == job.id:
+                    self.request = cmd.verb
+                    self._request(self.names["robot"], Command.make("stop", reason=cmd.verb), 2.0)
+                    return Reply.done()
+            if cmd.verb == "pause":
+                why = self.store.check_transition(job, "paused")
+                return Reply.refuse(why or f"job {job.id} is not printing")
+            self.store.transition(job.id, "aborted", "aborted by the operator")
+            return Reply.done()
+        return Reply.refuse(f"unknown supervisor command '{cmd.verb}'")
+
+    # -- helpers ---------------------------------------------------------------------------
+    def _request(self, node: str, cmd: Command, timeout: float = 5.0) -> Reply:
+        assert self.bus is not None
+        return self.bus.request(node, cmd, timeout)
+
+    def _need(self, *nodes: str) -> str:
+        missing = [self.names[n] for n in nodes if self.names[n] not in self.alive]
+        return f"node(s) {', '.join(missing)} not running" if missing else ""
+
+    def _wait_event(self, job_id: str, timeout: float) -> StreamEvent:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if self.names["robot"] not in self.alive:
+                raise Stopped(f"{self.names['robot']} process lost")
+            try:
+                ev = self.events.get(timeout=0.05)
+            except queue.Empty:
+                continue
+            if ev.job_id == job_id:
+                return ev
+        raise Stopped(f"robot did not finish within {timeout:g} s")
+
+    def _check_request(self) -> None:
+        """Raise ``Stopped`` if the operator paused or aborted the current job."""
+        if self.request:
+            raise Stopped(f"{self.request} requested")
+
+    def _move(self, job_id: str, **args: Any) -> None:
+        self._check_request()
+        reply = self._request(self.names["robot"], Command.make("move", job_id, **args))
+        if not reply.ok:
+            raise Stopped(reply.reason)
+        ev = self._wait_event(job_id, self.timeouts["move"])
+        if ev.kind != "moved":
+            raise Stopped(ev.reason or "move interrupted")
+
+    def _extruder(self, verb: str, **args: Any) -> None:
+        reply = self._request(self.names["extruder"], Command.make(verb, **args), 2.0)
+        if not reply.ok:
+            raise Stopped(f"extruder refused {verb}: {reply.reason}")
+
+    # -- the work loop ---------------------------------------------------------------------
+    def _work(self) -> None:
+        waiting_logged = ""
+        while not self.stopping.wait(self.poll_s):
+            job = self.store.next_pending(self.cell)
+            if job is None:
+                continue
+            try:
+                if job.state == "submitted":
+                    self._stage(job, "slice", "sliced")
+                elif job.state == "sliced":
+                    self._stage(job, "plan", "planned")
+                else:
+                    why = self._need("robot", "extruder")
+                    if why:
+                        if waiting_logged != job.id:
+                            log.warning("job %s waits: %s", job.id, why)
+                            waiting_logged = job.id
+                        continue
+                    self._print(job)
+            except InputError as exc:
+                self._fail(job.id, exc.one_line())
+            except Exception as exc:  # a bug must fail the job visibly, not kill the loop
+                log.exception("job %s", job.id)
+                self._fail(job.id, f"{type(exc).__name__}: {exc}")
+
+    def _fail(self, job_id: str, reason: str) -> None:
+        try:
+            self.store.transition(job_id, "failed", reason)
+        except InputError:  # aborted by the operator meanwhile: that state stands
+            log.info("job %s not failed (%s): %s", job_id, self.store.get(job_id).state, reason)
+
+    def _stage(self, job: JobRecord, verb: str, next_state: str) -> None:
+        node = self.names["slicer" if verb == "slice" else "planner"]
+        if node not in self.alive:
+            return
+        reply = self._request(node, Command.make(verb, job.id, model=job.model,
+                                                 job_file=job.job_file, cell_file=job.cell_file,
+                                                 dir=job.dir), self.timeouts[verb])
+        if reply.ok:
+            self.store.transition(job.id, next_state, expect=job.state)
+        else:
+            self.store.transition(job.id, "failed", f"{verb}: {reply.reason}")
+
+    def _print(self, job: JobRecord) -> None:
+        resume = job.state in ("paused", "interrupted")
+        traj = Path(job.dir) / "trajectory.npz"
+        if not traj.is_file():
+            raise InputError(f"job {job.id} has no trajectory.npz", "re-submit the job")
+        plan = StreamPlan.load(traj, self.dt)
+        digest = sha256_of(traj)
+        robot = self.names["robot"]
+        reply = self._request(robot, Command.make("load", job.id, path=str(traj), sha256=digest))
+        if not reply.ok:
+            raise InputError(f"pre-flight: {reply.reason}", "fix the job and re-submit it")
+        self.store.set_sizes(job.id, plan.layers, int(plan.wp_id.size), plan.samples)
+        start = max(job.sample, 0) if resume else 0
+        after = job.waypoint if resume else -1
+        with self._lock:
+            self.current, self.request = job.id, ""
+        while not self.events.empty():
+            self.events.get_nowait()
+        self.store.transition(job.id, "printing", "resumed" if resume else "", expect=job.state)
+        ext0 = self.extruder_state.volume if self.extruder_state else 0.0
+        try:
+            if not resume:
+                self._move(job.id, to="home")
+            self._move(job.id, to="sample", sample=start)
+            lead_n = round(self.lead_s / self.dt)
+            # Starting acknowledges a latched watchdog/stall fault (e.g. left by a killed
+            # extruder node); an e-stop is only cleared by the operator (`mesp estop --reset`).
+            self._extruder("clear")
+            on = bool(plan.extrude[min(start + lead_n, plan.samples - 1)])
+            if on:
+                self._extruder("start", rate=self.rate)
+                time.sleep(self.lead_s + (0.0 if resume else self.prime_s))
+            self._check_request()
+            reply = self._request(robot, Command.make("stream", job.id, start=start,
+                                                      after_waypoint=after, lead_s=self.lead_s,
+                                                      rate=self.rate))
+            if not reply.ok:
+                raise Stopped(reply.reason)
+            ev = self._monitor(job, plan, ext0)
+            if ev.kind == "done":
+                self._extruder("stop")
+            self._drain(job.id)
+            if ev.kind != "done":
+                raise Stopped(ev.reason or "stream stopped")
+            self._move(job.id, to="home")
+            self.store.progress(job.id, 100.0, 0.0, self._volume(job, ext0))
+            self.store.transition(job.id, "done")
+        except Stopped as exc:
+            self._stopped(job, str(exc), ext0)
+        finally:
+            with self._lock:
+                self.current, self.request = "", ""
+
+    def _stopped(self, job: JobRecord, reason: str, ext0: float) -> None:
+        try:
+            self._request(self.names["extruder"], Command.make("stop"), 1.0)
+            self._request(self.names["robot"], Command.make("stop", reason=reason), 1.0)
+        finally:
+            self._drain(job.id)
+            self.store.progress(job.id, self.store.get(job.id).percent, 0.0,
+                                self._volume(job, ext0))
+            req = self.request
+            if req == "pause":
+                self.store.transition(job.id, "paused", "paused by the operator")
+            elif req == "abort":
+                self.store.transition(job.id, "aborted", "aborted by the operator")
+            else:
+                self.store.transition(job.id, "interrupted", reason)
+            log.warning("job %s stopped: %s", job.id, reason)
+
+    def _volume(self, job: JobRecord, ext0: float) -> float:
+        now = self.extruder_state.volume if self.extruder_state else ext0
+        return job.volume + max(0.0, now - ext0)
+
+    def _drain(self, job_id: str) -> None:
+        """Record the waypoints still queued (they may trail the stream's end event)."""
+        time.sleep(0.05)
+        last: WaypointReached | None = None
+        while not self.waypoints.empty():
+            wp = self.waypoints.get_nowait()
+            if wp.job_id == job_id:
+                last = wp
+        if last is not None:
+            self.store.checkpoint(job_id, last.layer, last.waypoint, last.sample)
+
+    def _monitor(self, job: JobRecord, plan: StreamPlan, ext0: float) -> StreamEvent:
+        """Follow the stream (checkpoints, progress) until it ends. The robot node switches
+        the extruder on the servo clock."""
+        assert self.bus is not None
+        K = plan.samples
+        last_report = 0.0
+        layer = max(job.layer, 0)
+        wp_last = job.waypoint
+        while True:
+            if self.names["robot"] not in self.alive:
+                raise Stopped(f"{self.names['robot']} process lost")
+            if self.names["extruder"] not in self.alive:
+                self._request(self.names["robot"], Command.make("stop", reason="extruder lost"),
+                              1.0)
+            if self.request:
+                self._request(self.names["robot"], Command.make("stop", reason=self.request),
+                              1.0)
+            try:
+                ev = self.events.get(timeout=0.01)
+                if ev.job_id == job.id and ev.kind in ("done", "stopped"):
+                    return ev
+            except queue.Empty:
+                pass
+            last: WaypointReached | None = None
+            while not self.waypoints.empty():
+                wp = self.waypoints.get_nowait()
+                if wp.job_id == job.id:
+                    last = wp
+            if last is not None:
+                self.store.checkpoint(job.id, last.layer, last.waypoint, last.sample)
+                layer, wp_last = max(last.layer, 0), last.waypoint
+            rs = self.robot_state
+            s = rs.sample if rs is not None and rs.job_id == job.id else -1
+            now = time.monotonic()
+            if now - last_report > 0.2 and s >= 0:
+                last_report = now
+                percent = 100.0 * (s + 1) / K
+                eta = (K - 1 - s) * self.dt / self.time_scale
+                vol = self._volume(job, ext0)
+                self.store.progress(job.id, percent, eta, vol)
+                self.bus.publish("progress", JobProgress(
+                    job.id, "printing", layer, plan.layers, wp_last, int(plan.wp_id.size),
+                    percent, eta, vol, time.time()))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Process entry point."""
+    return node_main(SupervisorNode, argv, "supervisor")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

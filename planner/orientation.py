@@ -1,0 +1,421 @@
+"""Nozzle orientation per sample: axis along -normal, spin free, tilt within [alpha_min, alpha_max].
+
+The nozzle axis (tool z, out of the tip) is ``-normal`` at alpha = 90 deg; alpha is the angle
+between the axis and the direction of motion. Rotation ``psi`` about the axis is the free
+redundancy of the 6-axis arm. ``Reach`` checks a batch of tool poses (IK on the home branch,
+joint limits with margin, singularity, clearance); ``choose`` picks psi by dynamic programming
+over a subsample (margins as cost, smooth spin), then tilts the axis in the plane of normal
+and motion (changing alpha) only where a sample fails, with the smallest tilt that keeps alpha
+in range, ramping the tilt in and out. Positions here are mm, angles rad.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from planner import kinematics as kin
+from planner.cell import CellConfig
+from planner.collision import CollisionModel
+
+OK, NO_IK, JOINT_LIMIT, SINGULAR, COLLISION, ALPHA = 0, 1, 2, 3, 4, 5
+REASONS = {
+    NO_IK: "out of reach (no inverse kinematics solution on the home branch)",
+    JOINT_LIMIT: "joint limit",
+    SINGULAR: "near a singularity",
+    COLLISION: "collision",
+    ALPHA: "printing angle alpha outside the allowed range",
+}
+
+
+def unit(v: np.ndarray) -> np.ndarray:
+    """Rows of ``v`` (..., 3) normalised (zero rows stay zero)."""
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(n > 1e-12, n, 1.0)
+
+
+def any_perpendicular(n: np.ndarray) -> np.ndarray:
+    """A unit vector perpendicular to each unit row of ``n`` (..., 3)."""
+    ref = np.where(np.abs(n[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    return unit(np.cross(n, ref))
+
+
+def nozzle_axis(normal: np.ndarray, tangent: np.ndarray, tilt: np.ndarray) -> np.ndarray:
+    """Nozzle axis (N, 3) unit: ``-normal`` leaned by ``tilt`` (N,) rad towards the motion.
+
+    The axis turns in the plane of the normal and the motion direction:
+    axis = -cos(tilt) n + sin(tilt) t_perp, t_perp the unit part of the tangent perpendicular
+    to n. The printing angle is then alpha = alpha0 - tilt with alpha0 = angle(-n, t) (90 deg
+    when the motion lies in the layer).
+    """
+    t = tangent - np.einsum("ni,ni->n", tangent, normal)[:, None] * normal
+    bad = np.linalg.norm(t, axis=1) < 1e-9
+    t = np.where(bad[:, None], any_perpendicular(normal), unit(t))
+    return unit(-np.cos(tilt)[:, None] * normal + np.sin(tilt)[:, None] * t)
+
+
+def alpha_of(axis: np.ndarray, tangent: np.ndarray) -> np.ndarray:
+    """Printing angle (N,) rad between nozzle axes and motion directions (N, 3)."""
+    c = np.einsum("ni,ni->n", unit(axis), unit(tangent))
+    return np.arccos(np.clip(c, -1.0, 1.0))
+
+
+def tool_rotation(axis: np.ndarray, psi: np.ndarray) -> np.ndarray:
+    """Tool orientations (N, 3, 3): z = ``axis``, x from the base x axis turned by ``psi`` rad."""
+    ref = np.where(np.abs(axis[:, :1]) < 0.95, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
+    x0 = unit(ref - np.einsum("ni,ni->n", ref, axis)[:, None] * axis)
+    y0 = np.cross(axis, x0)
+    c, s = np.cos(psi)[:, None], np.sin(psi)[:, None]
+    x = c * x0 + s * y0
+    y = -s * x0 + c * y0
+    return np.stack([x, y, axis], axis=2)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """A batch of tool poses checked for reachability.
+
+    Attributes:
+        q: (S, 6) float64, rad, joint solution on the home branch (nearest to ``q_ref``);
+            nan where no solution.
+        status: (S,) int8, OK or a reason code (NO_IK, JOINT_LIMIT, SINGULAR, COLLISION).
+        singular: (S,) float64, distance from the singularities (``singularity_margin``).
+        clearance: (S,) float64, mm (nan if not computed or no solution).
+        margin: (S,) float64, rad, smallest distance to a joint position limit.
+        pair: (S,) int32, index of the closest collision pair (into CollisionModel.names).
+    """
+
+    q: np.ndarray
+    status: np.ndarray
+    singular: np.ndarray
+    clearance: np.ndarray
+    margin: np.ndarray
+    pair: np.ndarray
+
+
+class Reach:
+    """Checks tool poses of one cell: IK branch of home, limits, singularity, clearance."""
+
+    def __init__(self, cell: CellConfig, collision: CollisionModel | None = None) -> None:
+        self.cell = cell
+        self.collision = collision if collision is not None else CollisionModel(cell)
+        self.home = np.radians(cell.robot.home_deg)
+        self.branch = int(kin.branch_of(self.home))
+        margin = np.radians(cell.planning.joint_margin_deg)
+        self.lo = np.radians(cell.robot.joint_min_deg)
+        self.hi = np.radians(cell.robot.joint_max_deg)
+        self.lo_safe = self.lo + margin
+        self.hi_safe = self.hi - margin
+        self.tool_m = cell.tool.tool_T.copy()
+        self.tool_m[:3, 3] /= 1000.0
+        self.tool_inv_m = np.linalg.inv(self.tool_m)
+
+    def solve(self, tcp_mm: np.ndarray, R: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+        """IK on the home branch, each angle wrapped to the turn nearest ``q_ref`` (6,) or (S, 6).
+
+        Args:
+            tcp_mm: (S, 3) float64, mm, nozzle tip in the base frame.
+            R: (S, 3, 3) float64, tool orientations in the base frame.
+        Returns:
+            (S, 6) float64, rad; nan rows where there is no solution.
+        """
+        q = np.empty((len(tcp_mm), 6))
+        chunk = 16384  # cache-sized batches: large temporaries dominate otherwise
+        for start in range(0, len(tcp_mm), chunk):
+            sl = slice(start, start + chunk)
+            T = np.zeros((len(tcp_mm[sl]), 4, 4))
+            T[:, :3, :3] = R[sl]
+            T[:, :3, 3] = tcp_mm[sl] / 1000.0
+            T[:, 3, 3] = 1.0
+            q[sl] = kin.ik(T @ self.tool_inv_m, (self.branch,))[0][:, 0]
+        return self.wrap(q, q_ref)
+
+    def wrap(self, q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
+        """Each angle of ``q`` (S, 6) shifted by whole turns to lie within the joint limits,
+        nearest ``q_ref`` (6,) or (S, 6); the nearest turn if no shift fits."""
+        near = q + 2 * np.pi * np.round((q_ref - q) / (2 * np.pi))
+        cand = near[..., None] + 2 * np.pi * np.array([0.0, -1.0, 1.0])  # (S, 6, 3)
+        inside = (cand >= self.lo[:, None]) & (cand <= self.hi[:, None])
+        dist = np.abs(cand - np.broadcast_to(q_ref, q.shape)[..., None])
+        dist = np.where(inside, dist, dist + 1e6)
+        pick = np.argmin(dist, axis=-1)
+        return np.take_along_axis(cand, pick[..., None], axis=-1)[..., 0]
+
+    def check(
+        self, q: np.ndarray, clearance: bool = True, iters: int = 14
+    ) -> Evaluation:
+        """Status and margins of configurations ``q`` (S, 6) rad (nan rows = no IK)."""
+        S = len(q)
+        status = np.zeros(S, dtype=np.int8)
+        has = ~np.isnan(q).any(axis=1)
+        status[~has] = NO_IK
+        qs = np.where(has[:, None], q, self.home)
+        margin = np.minimum(qs - self.lo, self.hi - qs).min(axis=1)
+        limit = np.any((qs < self.lo_safe) | (qs > self.hi_safe), axis=1)
+        status[has & limit] = JOINT_LIMIT
+        singular = kin.singularity_margin(qs)
+        sing = singular < self.cell.planning.singular_margin
+        status[has & ~limit & sing] = SINGULAR
+        clear = np.full(S, np.nan)
+        pair = np.full(S, -1, dtype=np.int32)
+        if clearance and has.any():
+            c = self.collision.clearance(qs[has], iters=iters)
+            clear[has] = c.distance
+            pair[has] = c.pair
+            hit = has & (clear < self.cell.planning.clearance_mm)
+            status[hit & (status == OK)] = COLLISION
+        return Evaluation(q, status, singular, clear, margin, pair)
+
+    def cost(self, ev: Evaluation) -> np.ndarray:
+        """Margin cost (S,) of evaluated poses: inf if not OK, small with wide margins."""
+        c_clear = np.maximum(0.0, 1.0 - np.nan_to_num(ev.clearance, nan=1e3) / 50.0) ** 2
+        c_sing = np.maximum(0.0, 1.0 - ev.singular / 0.3) ** 2
+        c_joint = np.maximum(0.0, 1.0 - ev.margin / np.radians(30.0)) ** 2
+        cost = c_clear + c_sing + c_joint
+        return np.where(ev.status == OK, cost, np.inf)
+
+
+@dataclass(frozen=True)
+class Orientation:
+    """The chosen orientation of every sample.
+
+    Attributes:
+        q: (M, 6) float64, rad, continuous along the job (nan where no IK solution at all).
+        axis: (M, 3) float64, unit nozzle axis in the base frame.
+        psi: (M,) float64, rad, spin about the axis (unwrapped).
+        tilt: (M,) float64, rad, lean of the axis from -normal towards the motion
+            (alpha = alpha0 - tilt, see ``nozzle_axis``).
+        status: (M,) int8, OK or the reason the sample is not reachable within limits.
+        pair: (M,) int32, closest collision pair where clearance was computed, else -1.
+        clearance: (M,) float64, mm, clearance where computed (every few samples and densely
+            near the requirement), nan elsewhere.
+    """
+
+    q: np.ndarray
+    axis: np.ndarray
+    psi: np.ndarray
+    tilt: np.ndarray
+    status: np.ndarray
+    pair: np.ndarray
+    clearance: np.ndarray
+
+
+def tilt_levels(cell: CellConfig, alpha0: np.ndarray, step_deg: float = 5.0) -> np.ndarray:
+    """Tilts (rad) to try, smallest first (0, +5, -5, +10, ... deg), covering every tilt that
+    brings some sample's alpha = alpha0 - tilt into [alpha_min, alpha_max] (at most 45 deg)."""
+    lo, hi = cell.planning.alpha_min_deg, cell.planning.alpha_max_deg
+    a0 = np.degrees(alpha0) if len(alpha0) else np.array([90.0])
+    t_min = max(float(a0.min()) - hi, -45.0)
+    t_max = min(float(a0.max()) - lo, 45.0)
+    k = np.arange(np.ceil(t_min / step_deg), np.floor(t_max / step_deg) + 1) * step_deg
+    k = np.union1d(k, [0.0])
+    order = np.lexsort((-k, np.abs(k)))  # by size, positive first
+    return np.radians(k[order])
+
+
+def alpha_allowed(cell: CellConfig, alpha: np.ndarray, extrude: np.ndarray) -> np.ndarray:
+    """(N,) bool: alpha (rad) is within the allowed range, or the sample does not extrude."""
+    lo, hi = np.radians([cell.planning.alpha_min_deg, cell.planning.alpha_max_deg])
+    return ~extrude | ((alpha >= lo - 1e-9) & (alpha <= hi + 1e-9))
+
+
+def _viterbi(cost: np.ndarray, grid: np.ndarray, weight: float) -> np.ndarray:
+    """Cheapest state sequence: node cost (S, K) plus weight * (wrapped spin change)^2."""
+    S, K = cost.shape
+    d = np.angle(np.exp(1j * (grid[:, None] - grid[None, :])))
+    trans = weight * d**2
+    finite = np.where(np.isfinite(cost), cost, 1e6)
+    acc = finite[0].copy()
+    back = np.zeros((S, K), dtype=np.int64)
+    for s in range(1, S):  # a loop over coarse samples (<= a few thousand), not elements
+        tot = acc[None, :] + trans
+        back[s] = np.argmin(tot, axis=1)
+        acc = tot[np.arange(K), back[s]] + finite[s]
+    path = np.empty(S, dtype=np.int64)
+    path[-1] = int(np.argmin(acc))
+    for s in range(S - 1, 0, -1):
+        path[s - 1] = back[s, path[s]]
+    return path
+
+
+def _ramp(dev: np.ndarray, per_sample: float) -> np.ndarray:
+    """Spread deviations so they ramp in and out at ``per_sample`` rad per sample."""
+    width = int(min(np.ceil(np.abs(dev).max() / per_sample), 2000)) if dev.size else 0
+    if width == 0:
+        return dev
+    k = np.arange(-width, width + 1)
+    structure = -per_sample * np.abs(k)
+    pos = ndimage.grey_dilation(np.maximum(dev, 0.0), structure=structure, mode="nearest")
+    neg = ndimage.grey_dilation(np.maximum(-dev, 0.0), structure=structure, mode="nearest")
+    return np.maximum(pos, 0.0) - np.maximum(neg, 0.0)
+
+
+def choose(
+    reach: Reach,
+    tcp: np.ndarray,
+    normal: np.ndarray,
+    tangent: np.ndarray,
+    extrude: np.ndarray,
+    coarse: int = 600,
+    clearance_stride: int = 4,
+) -> Orientation:
+    """Pick spin and tilt for every sample (see module docstring).
+
+    Args:
+        tcp: (M, 3) float64, mm, nozzle tip targets in the base frame.
+        normal: (M, 3) float64, unit printing directions in the base frame.
+        tangent: (M, 3) float64, unit motion directions in the base frame.
+        extrude: (M,) bool; alpha limits apply to extruding samples only.
+        coarse: size of the subsample for the spin search.
+        clearance_stride: full-resolution clearance every this many samples (plus every
+            sample near the required clearance).
+    """
+    cell = reach.cell
+    M = len(tcp)
+    K = cell.planning.spin_steps
+    grid = np.linspace(-np.pi, np.pi, K, endpoint=False)
+    alpha0 = alpha_of(-normal, tangent)
+    levels = tilt_levels(cell, alpha0)
+
+    # 1. coarse spin search on a subsample, alpha tilted only where needed
+    sub = np.unique(np.append(np.linspace(0, M - 1, min(M, coarse)).round().astype(int), M - 1))
+    S = len(sub)
+    cost = np.full((S, K), np.inf)
+    dev = np.zeros((S, K))
+    for level in levels:
+        todo = np.flatnonzero(~np.isfinite(cost).any(axis=1))
+        if not len(todo):
+            break
+        idx = sub[todo]
+        ax = nozzle_axis(normal[idx], tangent[idx], np.full(len(idx), level))
+        ax_r = np.repeat(ax, K, axis=0)
+        psi = np.tile(grid, len(idx))
+        R = tool_rotation(ax_r, psi)
+        q = reach.solve(np.repeat(tcp[idx], K, axis=0), R, reach.home)
+        ev = reach.check(q, iters=8)
+        c = reach.cost(ev).reshape(len(idx), K) + (level / np.radians(20.0)) ** 2
+        allowed = alpha_allowed(cell, alpha0[idx] - level, extrude[idx])
+        c[~allowed] = np.inf
+        cost[todo] = c
+        dev[todo] = level
+    path = _viterbi(cost, grid, weight=10.0)
+    psi_sub = np.unwrap(grid[path])
+    dev_sub = dev[np.arange(S), path]
+    psi = np.interp(np.arange(M), sub, psi_sub)
+    # ramp tilts in and out (1 deg per sample) instead of stepping between levels
+    tilt = _ramp(np.interp(np.arange(M), sub, dev_sub), np.radians(1.0))
+    lo_a, hi_a = np.radians([cell.planning.alpha_min_deg, cell.planning.alpha_max_deg])
+    tilt = np.where(extrude, np.clip(tilt, alpha0 - hi_a, alpha0 - lo_a), tilt)
+
+    # 2. full resolution, then repair failing samples with the smallest change
+    def evaluate(rows: np.ndarray, psi_r: np.ndarray, dev_r: np.ndarray, q_ref: np.ndarray,
+                 stride: int) -> tuple[np.ndarray, Evaluation, np.ndarray]:
+        ax = nozzle_axis(normal[rows], tangent[rows], dev_r)
+        q = reach.solve(tcp[rows], tool_rotation(ax, psi_r), q_ref)
+        ev = reach.check(q, clearance=False)
+        clear = np.full(len(rows), np.nan)
+        pair = np.full(len(rows), -1, dtype=np.int32)
+        has = ~np.isnan(q).any(axis=1)
+        pick = np.zeros(len(rows), dtype=bool)
+        pick[::stride] = True
+        pick &= has
+        if pick.any():
+            c = reach.collision.clearance(q[pick])
+            clear[pick], pair[pick] = c.distance, c.pair
+            # densify where the strided clearance is close to the requirement
+            near = np.flatnonzero(pick)[c.distance < cell.planning.clearance_mm + 5.0]
+            if len(near) and stride > 1:
+                extra = np.unique(np.clip(near[:, None] + np.arange(-stride, stride + 1), 0,
+                                          len(rows) - 1))
+                extra = extra[has[extra] & ~pick[extra]]
+                if len(extra):
+                    c2 = reach.collision.clearance(q[extra])
+                    clear[extra], pair[extra] = c2.distance, c2.pair
+        status = ev.status.copy()
+        hit = has & (np.nan_to_num(clear, nan=np.inf) < cell.planning.clearance_mm)
+        status[hit & (status == OK)] = COLLISION
+        off = ~alpha_allowed(cell, alpha0[rows] - dev_r, extrude[rows])
+        status[off & (status == OK)] = ALPHA
+        ev = Evaluation(q, status, ev.singular, clear, ev.margin, pair)
+        return q, ev, ax
+
+    q_ref = _continuous_reference(reach, M)
+    q, ev, axis = evaluate(np.arange(M), psi, tilt, q_ref, clearance_stride)
+    status = ev.status.copy()
+    pair = ev.pair.copy()
+    clearance = ev.clearance.copy()
+    bad = np.flatnonzero(status != OK)
+    if len(bad):
+        new_psi, new_dev = psi.copy(), tilt.copy()
+        spins = np.radians([0.0, 15.0, -15.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0])
+        fixed = np.zeros(M, dtype=bool)
+        for level in levels:
+            for spin in spins:
+                rows = bad[~fixed[bad]]
+                if not len(rows) or (level == 0.0 and spin == 0.0):
+                    continue
+                trial_dev = np.full(len(rows), level)
+                _, e2, _ = evaluate(rows, psi[rows] + spin, trial_dev, reach.home, 1)
+                good = e2.status == OK
+                new_psi[rows[good]] = psi[rows[good]] + spin
+                new_dev[rows[good]] = level
+                fixed[rows[good]] = True
+        # ramp the changes in and out so the wrist does not jump, then re-check what changed
+        per_sample = np.radians(1.0)
+        old_psi, old_tilt = psi, tilt
+        psi = psi + _ramp(new_psi - psi, per_sample)
+        tilt = tilt + _ramp(new_dev - tilt, per_sample)
+        # keep extruding samples' alpha in range: alpha = alpha0 - tilt
+        lo, hi = np.radians([cell.planning.alpha_min_deg, cell.planning.alpha_max_deg])
+        tilt = np.where(extrude, np.clip(tilt, alpha0 - hi, alpha0 - lo), tilt)
+        changed = np.flatnonzero((np.abs(psi - old_psi) > 1e-12)
+                                 | (np.abs(tilt - old_tilt) > 1e-12))
+        if len(changed):
+            q_c, ev_c, ax_c = evaluate(changed, psi[changed], tilt[changed], q_ref[changed],
+                                       clearance_stride)
+            q[changed], axis[changed] = q_c, ax_c
+            status[changed], pair[changed] = ev_c.status, ev_c.pair
+            clearance[changed] = ev_c.clearance
+        # samples still failing keep the best candidate found, if any
+        still = np.flatnonzero((status != OK) & fixed)
+        if len(still):
+            q2, e3, ax3 = evaluate(still, new_psi[still], new_dev[still], reach.home, 1)
+            good = e3.status == OK
+            rows = still[good]
+            q[rows], axis[rows] = q2[good], ax3[good]
+            psi[rows], tilt[rows] = new_psi[rows], new_dev[rows]
+            status[rows] = OK
+            pair[rows], clearance[rows] = e3.pair[good], e3.clearance[good]
+    q = _make_continuous(q, reach.home, reach.lo, reach.hi)
+    lim_bad = np.any((q < reach.lo_safe) | (q > reach.hi_safe), axis=1) & (status == OK)
+    status[lim_bad] = JOINT_LIMIT
+    off = ~alpha_allowed(cell, alpha_of(axis, tangent), extrude) & (status == OK)
+    status[off] = ALPHA
+    return Orientation(q, axis, psi, tilt, status, pair, clearance)
+
+
+def _continuous_reference(reach: Reach, M: int) -> np.ndarray:
+    """Wrap reference for the first IK pass: home (continuity is restored afterwards)."""
+    return np.broadcast_to(reach.home, (M, 6))
+
+
+def _make_continuous(q: np.ndarray, home: np.ndarray, lo: np.ndarray,
+                     hi: np.ndarray) -> np.ndarray:
+    """Unwrap joint angles along the job (nan rows filled by interpolation), then shift each
+    joint by the whole turns that keep most samples within its limits, nearest home."""
+    q = q.copy()
+    has = ~np.isnan(q).any(axis=1)
+    if not has.any():
+        return q
+    idx = np.arange(len(q))
+    for j in range(6):  # six joints
+        q[:, j] = np.interp(idx, idx[has], q[has, j])
+    q = np.unwrap(q, axis=0)
+    q -= 2 * np.pi * np.round((q[0] - home) / (2 * np.pi))
+    shifts = 2 * np.pi * np.array([0.0, -1.0, 1.0])
+    for j in range(6):  # six joints, three candidate turns each
+        outside = [np.sum((q[:, j] + d < lo[j]) | (q[:, j] + d > hi[j])) for d in shifts]
+        q[:, j] += shifts[int(np.argmin(outside))]
+    return q

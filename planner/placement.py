@@ -1,0 +1,299 @@
+"""Where the model sits in the tank: position and rotation about z with the best clearance.
+
+The model frame is placed by its bounding-box bottom centre at ``offset`` (x, y, lift) from
+the tank's inner floor centre, rotated by ``yaw`` about z. A coarse search (yaw first, then
+a position grid) scores placements on a subsample of waypoints by (unreachable waypoints,
+smallest best-spin clearance); a refinement halves the steps around the winner. A placement
+that leaves part of the job unreachable is refused with an ``InputError``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from planner.cell import CellConfig, pose
+from planner.orientation import (
+    ALPHA,
+    COLLISION,
+    OK,
+    REASONS,
+    Reach,
+    alpha_allowed,
+    alpha_of,
+    nozzle_axis,
+    tilt_levels,
+    tool_rotation,
+)
+from slicer.errors import InputError
+from slicer.stages import Toolpath
+
+
+@dataclass(frozen=True)
+class Placement:
+    """A model placement and its score.
+
+    Attributes:
+        model_T: (4, 4) float64, mm, model frame -> robot base frame.
+        offset_mm: (3,) bounding-box bottom centre from the inner floor centre (x, y, lift).
+        yaw_deg: rotation about z, deg.
+        unreachable: sampled waypoints no spin reaches at any allowed alpha.
+        clearance_mm: clearance score (see ``score``), mm.
+        evaluated: how many placements were scored.
+        worst_reason: reason code of the first unreachable sampled waypoint (0 if none;
+            100 + pair index for a collision).
+        worst_waypoint: its toolpath index (-1 if none).
+    """
+
+    model_T: np.ndarray
+    offset_mm: tuple[float, float, float]
+    yaw_deg: float
+    unreachable: int
+    clearance_mm: float
+    evaluated: int
+    worst_reason: int
+    worst_waypoint: int
+
+
+def bbox(toolpath: Toolpath) -> tuple[np.ndarray, np.ndarray]:
+    """Bounding box (lo, hi), each (3,) mm, of the waypoints in the model frame."""
+    return toolpath.position.min(axis=0), toolpath.position.max(axis=0)
+
+
+def model_transform(cell: CellConfig, box: tuple[np.ndarray, np.ndarray], offset: np.ndarray,
+                    yaw_deg: float) -> np.ndarray:
+    """Model frame -> robot base frame (4, 4) mm for a placement (see module docstring).
+
+    ``box`` is the toolpath's bounding box from ``bbox``.
+    """
+    lo, hi = box
+    centre = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]])
+    recentre = np.eye(4)
+    recentre[:3, 3] = -centre
+    return cell.tank_in_base @ pose(tuple(offset), (0.0, 0.0, yaw_deg)) @ recentre
+
+
+def _fits(cell: CellConfig, box: tuple[np.ndarray, np.ndarray], offset: np.ndarray,
+          yaw_deg: float) -> bool:
+    """The rotated bounding box stays ``wall_margin_mm`` inside the tank walls."""
+    lo, hi = box
+    hx, hy = (hi[0] - lo[0]) / 2, (hi[1] - lo[1]) / 2
+    c, s = abs(np.cos(np.radians(yaw_deg))), abs(np.sin(np.radians(yaw_deg)))
+    ex, ey = c * hx + s * hy, s * hx + c * hy
+    m = cell.placement.wall_margin_mm
+    ix, iy, _ = cell.tank.inner_size_mm
+    return bool(abs(offset[0]) + ex <= ix / 2 - m + 1e-9 and abs(offset[1]) + ey <= iy / 2 - m
+                + 1e-9)
+
+
+def waypoint_tangents(position: np.ndarray, path: np.ndarray) -> np.ndarray:
+    """Unit motion direction (N, 3) at each waypoint: central differences inside a path."""
+    N = len(position)
+    t = np.zeros((N, 3))
+    if N < 2:
+        return t
+    same_next = np.zeros(N, dtype=bool)
+    same_next[:-1] = path[1:] == path[:-1]
+    same_prev = np.zeros(N, dtype=bool)
+    same_prev[1:] = path[1:] == path[:-1]
+    nxt = np.where(same_next, np.roll(np.arange(N), -1), np.arange(N))
+    prv = np.where(same_prev, np.roll(np.arange(N), 1), np.arange(N))
+    t = position[nxt] - position[prv]
+    n = np.linalg.norm(t, axis=1, keepdims=True)
+    return t / np.where(n > 1e-12, n, 1.0)
+
+
+def _tangents(toolpath: Toolpath, idx: np.ndarray) -> np.ndarray:
+    """Waypoint tangents at ``idx`` only (neighbours within the same path)."""
+    lo = np.maximum(idx - 1, 0)
+    hi = np.minimum(idx + 1, len(toolpath) - 1)
+    window = np.unique(np.concatenate([lo, idx, hi]))
+    t = waypoint_tangents(toolpath.position[window], toolpath.path[window])
+    return t[np.searchsorted(window, idx)]
+
+
+def score(reach: Reach, toolpath: Toolpath, model_T: np.ndarray, idx: np.ndarray,
+          spins: int = 8) -> tuple[int, float, int, int]:
+    """(unreachable count, clearance score mm, first reason, first waypoint) of a placement.
+
+    The clearance score is the smallest best-spin clearance over the sampled waypoints plus a
+    tenth of the mean of their lowest quarter (each capped at 100 mm), so ties of the minimum
+    (e.g. nozzle to floor, the same everywhere) are broken by the tight spots of the rest of
+    the job; each waypoint that needs a tilt costs 10 mm.
+    """
+    R_m = model_T[:3, :3]
+    p = toolpath.position[idx] @ R_m.T + model_T[:3, 3]
+    n = toolpath.normal[idx] @ R_m.T
+    t = _tangents(toolpath, idx) @ R_m.T
+    grid = np.linspace(-np.pi, np.pi, spins, endpoint=False)
+    best = np.full(len(idx), -np.inf)
+    reach_ok = np.zeros(len(idx), dtype=bool)
+    tilted = 0
+    first_status = np.zeros(len(idx), dtype=np.int64)
+    first_pair = np.full(len(idx), -1, dtype=np.int64)
+    alpha0 = alpha_of(-n, t)
+    extrude = toolpath.extrude[idx]
+    for li, level in enumerate(tilt_levels(reach.cell, alpha0, 10.0)):
+        rows = np.flatnonzero(~reach_ok)
+        if not len(rows):
+            break
+        ax = nozzle_axis(n[rows], t[rows], np.full(len(rows), level))
+        R = tool_rotation(np.repeat(ax, spins, axis=0), np.tile(grid, len(rows)))
+        q = reach.solve(np.repeat(p[rows], spins, axis=0), R, reach.home)
+        ev = reach.check(q, iters=8)
+        st = ev.status.reshape(len(rows), spins)
+        st = np.where(alpha_allowed(reach.cell, alpha0[rows] - level, extrude[rows])[:, None],
+                      st, np.int8(ALPHA))
+        ok = st == OK
+        clear = np.where(ok, np.nan_to_num(ev.clearance, nan=-1e9).reshape(len(rows), spins),
+                         -np.inf)
+        best[rows] = clear.max(axis=1)
+        good = ok.any(axis=1)
+        reach_ok[rows] = good
+        if li:
+            tilted += int(good.sum())
+        else:
+            fail = st[~good]
+            first_status[rows[~good]] = [np.bincount(f[f != OK]).argmax() for f in fail]
+            pairs = ev.pair.reshape(len(rows), spins)[~good]
+            first_pair[rows[~good]] = pairs.max(axis=1)
+    unreachable = int((~reach_ok).sum())
+    first_reason, first_wp = 0, -1
+    if unreachable:
+        i = int(np.flatnonzero(~reach_ok)[0])
+        first_reason = int(first_status[i])
+        first_wp = int(idx[i])
+        if first_reason == COLLISION and first_pair[i] >= 0:
+            first_reason = 100 + int(first_pair[i])
+    # tilted waypoints count as a lost 10 mm of clearance each: prefer placements without tilt
+    if reach_ok.any():
+        b = np.sort(np.minimum(best[reach_ok], 100.0))
+        value = float(b[0] + 0.1 * b[: max(1, len(b) // 4)].mean()) - 10.0 * tilted
+    else:
+        value = -np.inf
+    return unreachable, value, first_reason, first_wp
+
+
+def _reason_text(reach: Reach, code: int) -> str:
+    if code >= 100:
+        return f"collision of {reach.collision.names[code - 100]}"
+    return REASONS.get(code, "unknown")
+
+
+def _fix_text(reach: Reach, code: int) -> str:
+    """What the user can change in the cell TOML for a failure of this kind."""
+    name = reach.collision.names[code - 100] if code >= 100 else ""
+    if "tank_wall" in name:
+        return ("use a wider tank ([tank] inner_size_mm), a longer nozzle ([tool] "
+                "nozzle_length_mm, tip_xyz_mm) or a smaller model")
+    if "gel" in name or "tank_floor" in name:
+        return ("lower the gel ([tank] gel_fill_mm), lift the model less ([placement] "
+                "offset_mm) or use a longer nozzle ([tool] nozzle_length_mm, tip_xyz_mm)")
+    if code >= 100:
+        return "move the tank or the robot base ([tank] floor_center_mm, [robot] base_xyz_mm)"
+    return ("move the tank closer to the robot or the robot base ([tank] floor_center_mm, "
+            "[robot] base_xyz_mm), or use a smaller model")
+
+
+def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Placement:
+    """Search (or just check) the model placement; refuse one that leaves waypoints unreachable.
+
+    Raises:
+        InputError: the model does not fit in the tank or the gel, or no placement reaches
+            the sampled waypoints.
+    """
+    cell = reach.cell
+    pc = cell.placement
+    box = bbox(toolpath)
+    lo, hi = box
+    height = hi[2] - lo[2]
+    if pc.offset_mm[2] + height > cell.tank.gel_fill_mm:
+        raise InputError(
+            f"the model ({height:.1f} mm tall, lifted {pc.offset_mm[2]:.1f} mm) rises above the "
+            f"gel surface ({cell.tank.gel_fill_mm:.1f} mm)",
+            "raise [tank] gel_fill_mm or lower [placement] offset_mm[2] in the cell TOML",
+        )
+    N = len(toolpath)
+    idx = np.unique(np.linspace(0, N - 1, min(N, samples)).round().astype(int))
+    # where reach and walls bite first: the extreme waypoints in eight horizontal directions
+    # (and up and down), and the waypoints whose normals lean furthest, weighted by how far
+    # out they lie in the direction they lean
+    ang = np.linspace(0.0, 2 * np.pi, 8, endpoint=False)
+    dirs = np.stack([np.cos(ang), np.sin(ang), np.zeros(8)], axis=1)
+    centre = 0.5 * (lo + hi)
+    rel = toolpath.position - centre
+    extremes = np.concatenate([
+        np.argmax(rel @ dirs.T, axis=0),
+        [int(np.argmin(rel[:, 2])), int(np.argmax(rel[:, 2]))],
+        np.argmax((rel[:, :2] @ dirs[:, :2].T) * np.maximum(toolpath.normal[:, :2]
+                                                            @ dirs[:, :2].T, 0.0), axis=0),
+    ])
+    lean = np.linalg.norm(toolpath.normal[:, :2], axis=1)
+    steep = np.argsort(-lean)[: max(1, samples // 2)]
+    idx = np.unique(np.concatenate([idx, extremes, steep]))
+    lift = pc.offset_mm[2]
+    evaluated = 0
+    cache: dict[tuple[float, float, float], tuple[int, float, int, int]] = {}
+
+    def key(x: float, y: float, yaw: float) -> tuple[int, float]:
+        nonlocal evaluated
+        k = (round(x, 6), round(y, 6), round(yaw % 360.0, 6))
+        if k not in cache:
+            evaluated += 1
+            cache[k] = score(reach, toolpath, model_transform(cell, box,
+                             np.array([x, y, lift]), yaw), idx)
+        u, c, _, _ = cache[k]
+        return (u, -c)
+
+    x0, y0, yaw0 = pc.offset_mm[0], pc.offset_mm[1], pc.yaw_deg
+    if not _fits(cell, box, np.array([x0, y0]), yaw0) and not pc.search:
+        raise InputError(
+            f"the model ({hi[0] - lo[0]:.0f} x {hi[1] - lo[1]:.0f} mm) at offset "
+            f"({x0:.0f}, {y0:.0f}) mm does not fit inside the tank walls",
+            "move [placement] offset_mm, enlarge [tank] inner_size_mm or enable search",
+        )
+    best = (x0, y0, yaw0)
+    if pc.search:
+        yaws = np.arange(0.0, 360.0, pc.search_yaw_step_deg) + yaw0
+        cands = [(x0, y0, float(y)) for y in yaws if _fits(cell, box, np.array([x0, y0]), y)]
+        if not cands:
+            cands = [(0.0, 0.0, float(y)) for y in yaws
+                     if _fits(cell, box, np.zeros(2), y)]
+        if not cands:
+            raise InputError(
+                f"the model ({hi[0] - lo[0]:.0f} x {hi[1] - lo[1]:.0f} mm) does not fit inside "
+                f"the tank ({cell.tank.inner_size_mm[0]:.0f} x {cell.tank.inner_size_mm[1]:.0f}"
+                f" mm, margin {pc.wall_margin_mm:.0f} mm) at any rotation",
+                "use a larger tank ([tank] inner_size_mm) or a smaller model",
+            )
+        best = min(cands, key=lambda c: key(*c))
+        ix, iy, _ = cell.tank.inner_size_mm
+        # at most 7 x 7 grid points over the tank floor
+        step = max(pc.search_step_mm, ix / 6, iy / 6)
+        xs = np.arange(-ix / 2, ix / 2 + 1e-9, step)
+        ys = np.arange(-iy / 2, iy / 2 + 1e-9, step)
+        grid = [(float(x), float(y), best[2]) for x in xs for y in ys
+                if _fits(cell, box, np.array([x, y]), best[2])]
+        if grid:
+            best = min([*grid, best], key=lambda c: key(*c))
+        # refine: half steps around the winner
+        for scale in (0.5, 0.25):
+            s, a = step * scale, pc.search_yaw_step_deg * scale
+            near = [(best[0] + dx, best[1] + dy, best[2] + da)
+                    for dx in (-s, 0.0, s) for dy in (-s, 0.0, s) for da in (-a, 0.0, a)]
+            near = [c for c in near if _fits(cell, box, np.array(c[:2]), c[2])]
+            best = min([*near, best], key=lambda c: key(*c))
+    else:
+        key(*best)
+    u, c, reason, wp = cache[(round(best[0], 6), round(best[1], 6), round(best[2] % 360.0, 6))]
+    offset = (best[0], best[1], lift)
+    if u:
+        raise InputError(
+            f"no reachable placement: at the best one (offset {best[0]:.0f}, {best[1]:.0f} mm, "
+            f"yaw {best[2]:.0f} deg) {u} of {len(idx)} sampled waypoints are unreachable, e.g. "
+            f"waypoint {wp}: {_reason_text(reach, reason)}",
+            _fix_text(reach, reason),
+        )
+    model_T = model_transform(cell, box, np.array(offset), best[2])
+    return Placement(model_T, offset, float(best[2] % 360.0), u, c, evaluated, reason, wp)

@@ -1,0 +1,585 @@
+"""Virtual print: ink deposited by a toolpath into the support gel, on a voxel grid.
+
+Model (paper sections 3.1, 3.2):
+
+* The extruder pushes ink at a constant volumetric rate C (mm^3/s). A move of length L at
+  nozzle speed v lasts dt = L / v and deposits C * dt; the filament cross-section has area
+  A = C / v and is an ellipse w_f x h_f given by the calibrated morphology (``filament_size``),
+  rescaled if needed so that pi/4 * w_f * h_f == C / v exactly.
+* The ellipse is centred on the nozzle tip, its h_f axis along the printing direction (the
+  waypoint ``normal``, projected perpendicular to the motion) and its w_f axis across the motion.
+  Each extruding segment sweeps it along the segment (flat ends, so consecutive collinear
+  segments tile without overlap).
+* Silicone and gel do not mix: a voxel holds an ink fraction f in [0, 1], the rest is gel. Each
+  segment's volume is shared over the voxels its swept ellipse covers, in proportion to the
+  covered part of each voxel (exact along the segment, first-order signed distance across the
+  ellipse), so the deposit resolves the filament boundary below the voxel size.
+  Neighbouring filaments fuse only where they overlap; where they merely touch, the gel between
+  them stays (pores).
+* Ink landing in voxels that are already full (f > 1 after adding it) cannot compress: it is
+  displaced into nearby free space (see ``_spread_chunk``). The connected over-full regions
+  (where a new filament overlaps older ink) push their excess into the nearest voxels with
+  room, nearest first; gaps and grooves of the ink (free voxels a morphological closing of the
+  ink bridges, up to ``gap_mm`` wide) are wetted first, since the immiscible ink lowers its
+  interface with the gel that way, and only then open gel. This is what makes a
+  volume-matched toolpath fill the gaps between filaments: the over-height of each filament
+  (h_f = H / beta) overlaps the layer below and is displaced into the gaps beside it; it is
+  also why stacked (non-staggered) rasters keep aligned voids and why the first layer, which
+  has nothing below to overlap, keeps its gaps (paper figure 3).
+* Not modelled: the printing angle's effect on w_f, h_f (alpha is kept near 90 deg by the
+  planner), gel flow, curing shrinkage, nozzle drag.
+
+The toolpath is processed in print order in chunks (a layer, split into at most
+``chunk_segments`` segments): a chunk's ink is rasterised at once (vectorised over segments
+and voxel candidates, batched), then its excess is spread. A segment deposits when its two
+waypoints belong to the same path and both extrude; its speed is the mean of theirs. Volume
+is conserved exactly up to float32 rounding of the fill field.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass, field
+from typing import NamedTuple, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import ndimage
+
+from sim.voxels import VoxelGrid, closing_cube, ragged_boxes
+from slicer.errors import InputError
+from slicer.progress import NullProgress, Progress
+from slicer.stages import Toolpath
+from slicer.tolerance import tol
+
+# A voxel counts as full above this fill fraction; excess below it is float noise.
+FULL = 1.0 - 1e-5
+# A voxel is over-full (must shed ink) above this; the margin absorbs float32 rounding.
+OVERFULL = 1.0 + 1e-5
+
+
+class Morphology(Protocol):
+    """What deposition needs from an extrusion profile (``slicer.extrusion.ExtrusionProfile``)."""
+
+    @property
+    def rate_mm3_s(self) -> float:
+        """mm^3/s, constant extrusion rate C."""
+        ...
+
+    def filament_size(self, v: NDArray[np.float64]) -> tuple[NDArray[np.float64],
+                                                              NDArray[np.float64]]:
+        """Filament width w_f and height h_f (mm) at nozzle speed ``v`` (mm/s)."""
+        ...
+
+
+@dataclass(frozen=True)
+class EllipseMorphology:
+    """A simple morphology with a constant aspect ratio (tests, benchmarks, no calibration).
+
+    Attributes:
+        rate_mm3_s: float, mm^3/s, extrusion rate C.
+        beta: float, overlap ratio H = beta * h_f (paper eq. 4).
+        aspect: float, h_f / w_f.
+    """
+
+    rate_mm3_s: float = 6.57
+    beta: float = 0.5
+    aspect: float = 1.0
+
+    def __post_init__(self) -> None:
+        if self.rate_mm3_s <= 0 or not 0 < self.beta <= 1 or self.aspect <= 0:
+            raise ValueError("need rate_mm3_s > 0, 0 < beta <= 1, aspect > 0")
+
+    def filament_size(self, v: NDArray[np.float64]) -> tuple[NDArray[np.float64],
+                                                              NDArray[np.float64]]:
+        area = self.rate_mm3_s / np.asarray(v, dtype=np.float64)
+        w = np.sqrt(4.0 * area / (np.pi * self.aspect))
+        return w, self.aspect * w
+
+    def speed_for_height(self, h_f: float) -> float:
+        """mm/s, the speed at which the filament height is ``h_f`` mm."""
+        w = h_f / self.aspect
+        return float(self.rate_mm3_s / (0.25 * np.pi * w * h_f))
+
+
+@dataclass(frozen=True)
+class DepositionConfig:
+    """Settings of the deposition simulation.
+
+    Attributes:
+        voxel_mm: float, mm, voxel edge.
+        pad_mm: float, mm, free margin around the job in an automatic grid.
+        spread_margin_mm: float, mm, how far beyond a chunk's own voxels excess ink may be
+            pushed in the first attempt (the neighbourhood searched for free voxels; it grows
+            automatically when a neighbourhood is full).
+        max_passes: int, nearest-free-voxel passes per chunk and neighbourhood.
+        chunk_segments: int, at most this many segments are rasterised before spreading.
+        batch_candidates: int, voxel candidates handled at once (bounds memory).
+        gap_mm: float, mm, excess goes first into gaps and grooves of the ink up to about this
+            width (free voxels a morphological closing of the ink fills); 0 = nearest free
+            voxel only.
+    """
+
+    voxel_mm: float = 0.25
+    pad_mm: float = 2.0
+    spread_margin_mm: float = 1.0
+    max_passes: int = 6
+    chunk_segments: int = 60_000
+    batch_candidates: int = 3_000_000
+    gap_mm: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not 0.01 <= self.voxel_mm <= 10.0:
+            raise InputError(f"voxel size {self.voxel_mm} mm is out of range",
+                             "use a voxel between 0.01 and 10 mm (default 0.25)")
+        if self.pad_mm < 0 or self.spread_margin_mm <= 0:
+            raise ValueError("need pad_mm >= 0 and spread_margin_mm > 0")
+        if self.max_passes < 1 or self.chunk_segments < 1 or self.batch_candidates < 1000:
+            raise ValueError("max_passes, chunk_segments must be >= 1, batch_candidates >= 1000")
+
+
+class Segments(NamedTuple):
+    """Extruding moves of a toolpath with their filament geometry, in print order.
+
+    start, end: (S, 3) float64, mm, segment end points (nozzle tip).
+    tangent: (S, 3) float64, unit direction of motion.
+    lateral: (S, 3) float64, unit, across the motion (w_f axis) = tangent x normal.
+    up: (S, 3) float64, unit, printing direction made perpendicular to the motion (h_f axis).
+    length: (S,) float64, mm.
+    speed: (S,) float64, mm/s, mean of the two waypoint speeds.
+    width: (S,) float64, mm, filament width w_f.
+    height: (S,) float64, mm, filament height h_f.
+    volume: (S,) float64, mm^3, C * length / speed.
+    layer: (S,) int32, layer of the segment.
+    waypoint: (S,) int64, toolpath index of the segment's first waypoint.
+    """
+
+    start: NDArray[np.float64]
+    end: NDArray[np.float64]
+    tangent: NDArray[np.float64]
+    lateral: NDArray[np.float64]
+    up: NDArray[np.float64]
+    length: NDArray[np.float64]
+    speed: NDArray[np.float64]
+    width: NDArray[np.float64]
+    height: NDArray[np.float64]
+    volume: NDArray[np.float64]
+    layer: NDArray[np.int32]
+    waypoint: NDArray[np.int64]
+
+
+def extrusion_segments(toolpath: Toolpath, morphology: Morphology) -> Segments:
+    """The extruding segments of ``toolpath``: consecutive waypoints of one path, both extruding.
+
+    Raises:
+        InputError: an extruding waypoint has a non-positive or non-finite speed.
+    """
+    n = len(toolpath)
+    i = np.arange(max(n - 1, 0))
+    dep = (toolpath.path[i] == toolpath.path[i + 1]) & toolpath.extrude[i] & toolpath.extrude[i + 1]
+    i = i[dep]
+    p0, p1 = toolpath.position[i], toolpath.position[i + 1]
+    d = p1 - p0
+    length = np.linalg.norm(d, axis=1)
+    keep = length > tol.merge
+    i, p0, p1, d, length = i[keep], p0[keep], p1[keep], d[keep], length[keep]
+    speed = 0.5 * (toolpath.speed[i] + toolpath.speed[i + 1])
+    if speed.size and not (np.all(np.isfinite(speed)) and speed.min() > 0):
+        raise InputError("the toolpath has extruding moves with a non-positive speed",
+                         "re-run mesp slice")
+    rate = float(morphology.rate_mm3_s)
+    tangent = d / length[:, None]
+    normal = toolpath.normal[i] + toolpath.normal[i + 1]
+    lateral = np.cross(tangent, normal)
+    norm = np.linalg.norm(lateral, axis=1)
+    bad = norm < 1e-6 * np.maximum(np.linalg.norm(normal, axis=1), 1.0)
+    if np.any(bad):
+        # Moving along the nozzle axis: any direction across the motion will do.
+        helper = np.where(np.abs(tangent[bad, 0:1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        lateral[bad] = np.cross(tangent[bad], helper)
+        norm[bad] = np.linalg.norm(lateral[bad], axis=1)
+    lateral /= norm[:, None]
+    up = np.cross(lateral, tangent)
+    w, h = morphology.filament_size(speed)
+    w = np.broadcast_to(np.asarray(w, dtype=np.float64), speed.shape).copy()
+    h = np.broadcast_to(np.asarray(h, dtype=np.float64), speed.shape).copy()
+    # Enforce the area C / v exactly: the morphology fit and the extruder rate must agree,
+    # otherwise volume would not be conserved.
+    scale = np.sqrt((rate / speed) / (0.25 * np.pi * w * h))
+    return Segments(
+        start=p0, end=p1, tangent=tangent, lateral=lateral, up=up, length=length, speed=speed,
+        width=w * scale, height=h * scale, volume=rate * length / speed,
+        layer=toolpath.layer[i].astype(np.int32), waypoint=i.astype(np.int64),
+    )
+
+
+class ChunkTrace(NamedTuple):
+    """What happened in one chunk.
+
+    layer: int, its layer.
+    segments: int, number of segments.
+    volume_mm3: float, ink it deposited.
+    displaced_mm3: float, ink pushed out of full voxels.
+    passes: int, nearest-free passes run.
+    max_spread_mm: float, largest distance ink was pushed.
+    residual_mm3: float, excess left in over-full voxels (0 unless no room was found).
+    """
+
+    layer: int
+    segments: int
+    volume_mm3: float
+    displaced_mm3: float
+    passes: int
+    max_spread_mm: float
+    residual_mm3: float
+
+
+@dataclass(frozen=True, eq=False)
+class Deposit:
+    """The simulated print.
+
+    Attributes:
+        grid: the voxel grid.
+        fill: (nx, ny, nz) float32, ink fraction of each voxel (1 = solid silicone, 0 = gel).
+        layer: (nx, ny, nz) int32, the layer that brought most of the voxel's ink (the last
+            one whose addition exceeded what the voxel held), -1 = none.
+        commanded_mm3: float, sum of C * dt over extruding segments.
+        status: "ok", or "overfull" when some excess found no free voxel (see ``trace``).
+        trace: one ChunkTrace per chunk, in print order.
+        timings: stage name -> seconds.
+        segments: number of extruding segments.
+    """
+
+    grid: VoxelGrid
+    fill: NDArray[np.float32]
+    layer: NDArray[np.int32]
+    commanded_mm3: float
+    status: str
+    trace: tuple[ChunkTrace, ...]
+    timings: dict[str, float] = field(default_factory=dict)
+    segments: int = 0
+
+    @property
+    def deposited_mm3(self) -> float:
+        """Ink volume on the grid, mm^3."""
+        return float(self.fill.sum(dtype=np.float64)) * self.grid.voxel_volume
+
+    @property
+    def volume_error(self) -> float:
+        """deposited / commanded - 1 (0 for an empty job)."""
+        return self.deposited_mm3 / self.commanded_mm3 - 1.0 if self.commanded_mm3 > 0 else 0.0
+
+
+def job_bounds(segments: Segments) -> NDArray[np.float64]:
+    """(2, 3) float64, mm, box holding every swept filament (min, max corner)."""
+    if len(segments.length) == 0:
+        return np.zeros((2, 3))
+    ext = _half_extent(segments)
+    lo = np.minimum(segments.start, segments.end) - ext
+    hi = np.maximum(segments.start, segments.end) + ext
+    return np.stack([lo.min(axis=0), hi.max(axis=0)])
+
+
+def _half_extent(seg: Segments) -> NDArray[np.float64]:
+    """(S, 3) float64, mm, half extent of each cross-section ellipse along x, y, z."""
+    a = 0.5 * seg.width[:, None] * seg.lateral
+    c = 0.5 * seg.height[:, None] * seg.up
+    return np.sqrt(a * a + c * c)
+
+
+def deposit(toolpath: Toolpath, morphology: Morphology,
+            config: DepositionConfig | None = None, grid: VoxelGrid | None = None,
+            progress: Progress | None = None) -> Deposit:
+    """Simulate the print of ``toolpath`` (see the module docstring for the model).
+
+    Args:
+        toolpath: waypoints in print order.
+        morphology: extrusion rate and filament size at a speed.
+        config: settings; defaults if None.
+        grid: the voxel grid; by default the job's bounding box plus ``config.pad_mm``.
+        progress: receives progress inside the deposition stage.
+
+    Returns:
+        The deposit; volume is conserved (deposited == commanded up to float32 rounding).
+    """
+    config = config or DepositionConfig()
+    progress = progress or NullProgress()
+    t0 = time.perf_counter()
+    seg = extrusion_segments(toolpath, morphology)
+    if grid is None:
+        box = job_bounds(seg)
+        grid = VoxelGrid.around(box[0], box[1], config.voxel_mm, config.pad_mm)
+    fill = np.zeros(grid.shape, dtype=np.float32)
+    tags = np.full(grid.shape, -1, dtype=np.int32)
+    timings = {"segments": time.perf_counter() - t0, "rasterise": 0.0, "spread": 0.0}
+    traces: list[ChunkTrace] = []
+    total = len(seg.length)
+    extent = _half_extent(seg)
+    for lo, hi in _chunks(seg.layer, config.chunk_segments):
+        t1 = time.perf_counter()
+        layer = int(seg.layer[lo])
+        box_lo, box_hi = _rasterise_chunk(seg, extent, lo, hi, grid, fill, tags, layer,
+                                          config.batch_candidates)
+        t2 = time.perf_counter()
+        trace = _spread_chunk(fill, tags, grid, box_lo, box_hi, layer, config)
+        timings["rasterise"] += t2 - t1
+        timings["spread"] += time.perf_counter() - t2
+        traces.append(trace._replace(segments=hi - lo,
+                                     volume_mm3=float(seg.volume[lo:hi].sum())))
+        progress.update(hi / max(total, 1), f"layer {layer}")
+    residual = sum(t.residual_mm3 for t in traces)
+    fill.setflags(write=False)
+    tags.setflags(write=False)
+    status = "ok" if residual <= 1e-6 * max(float(seg.volume.sum()), 1.0) else "overfull"
+    return Deposit(grid=grid, fill=fill, layer=tags, commanded_mm3=float(seg.volume.sum()),
+                   status=status, trace=tuple(traces), timings=timings, segments=total)
+
+
+def _chunks(layer: NDArray[np.int32], size: int) -> list[tuple[int, int]]:
+    """[lo, hi) index ranges: runs of equal layer, split into pieces of at most ``size``."""
+    if layer.size == 0:
+        return []
+    breaks = np.flatnonzero(np.diff(layer)) + 1
+    edges = np.concatenate([[0], breaks, [layer.size]])
+    out: list[tuple[int, int]] = []
+    for a, b in itertools.pairwise(edges.tolist()):
+        pieces = int(np.ceil((b - a) / size))
+        cuts = np.linspace(a, b, pieces + 1).round().astype(int)
+        out.extend(zip(cuts[:-1].tolist(), cuts[1:].tolist(), strict=True))
+    return out
+
+
+def _rasterise_chunk(seg: Segments, extent: NDArray[np.float64], lo: int, hi: int,
+                     grid: VoxelGrid,
+                     fill: NDArray[np.float32], tags: NDArray[np.int32], layer: int, batch: int
+                     ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
+    """Add the ink of segments [lo, hi) to ``fill``; returns the touched voxel box (inclusive)."""
+    shape = np.asarray(grid.shape)
+    vox = grid.voxel
+    org = grid.origin_array
+    p0, p1 = seg.start[lo:hi], seg.end[lo:hi]
+    ext = extent[lo:hi] + 0.5 * vox  # centres up to half a voxel outside get partial ink
+    vlo = np.ceil((np.minimum(p0, p1) - ext - org) / vox - 0.5).astype(np.int64)
+    vhi = np.floor((np.maximum(p0, p1) + ext - org) / vox - 0.5).astype(np.int64)
+    vlo = np.clip(vlo, 0, shape - 1)
+    vhi = np.clip(vhi, -1, shape - 1)
+    # Fallback voxel (midpoint) for filaments thinner than the grid resolves.
+    mid = np.clip(np.floor((0.5 * (p0 + p1) - org) / vox).astype(np.int64), 0, shape - 1)
+    box_lo = np.minimum(vlo.min(axis=0), mid.min(axis=0))
+    box_hi = np.maximum(vhi.max(axis=0), mid.max(axis=0))
+    sub_shape = box_hi - box_lo + 1
+    acc = np.zeros(int(np.prod(sub_shape)), dtype=np.float64)
+    # Per segment, in index space relative to the segment start; float32 is ample here.
+    t = seg.tangent[lo:hi].astype(np.float32)  # s in voxels
+    b = (seg.lateral[lo:hi] * vox / (0.5 * seg.width[lo:hi, None])).astype(np.float32)
+    u = (seg.up[lo:hi] * vox / (0.5 * seg.height[lo:hi, None])).astype(np.float32)
+    q0 = (org + (vlo + 0.5) * vox) - p0  # offset of the box's first voxel centre, mm
+    s0 = (np.einsum("ij,ij->i", q0, seg.tangent[lo:hi]) / vox).astype(np.float32)
+    b0 = np.einsum("ij,ij->i", q0, b / vox).astype(np.float32)
+    u0 = np.einsum("ij,ij->i", q0, u / vox).astype(np.float32)
+    length = (seg.length[lo:hi] / vox).astype(np.float32)  # in voxels
+    # Semi-axes in voxels: x, y below are normalised, x = 1 on the ellipse.
+    ax = (0.5 * seg.width[lo:hi] / vox).astype(np.float32)
+    ay = (0.5 * seg.height[lo:hi] / vox).astype(np.float32)
+    volume = seg.volume[lo:hi]
+    n = hi - lo
+    count = np.prod(np.maximum(vhi - vlo + 1, 0), axis=1)
+    cum = np.cumsum(count)
+    cuts = np.searchsorted(cum, np.arange(batch, int(cum[-1]) if n else 0, batch), side="right")
+    weight_sum = np.zeros(n, dtype=np.float64)
+    hits: list[tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float32]]] = []
+    # Per-segment coefficients in one float32 table, repeated once per candidate voxel
+    # (a candidate's segment is contiguous, so np.repeat beats 15 separate gathers).
+    coef = np.column_stack([s0, t, b0, b, u0, u, length, 1.0 / ax, 1.0 / ay]).astype(np.float32)
+    for part in np.split(np.arange(n), cuts):
+        if part.size == 0:
+            continue
+        _, cell = ragged_boxes(vlo[part], vhi[part])
+        cnt = count[part]
+        k = np.repeat(part, cnt)
+        ck = np.repeat(coef[part], cnt, axis=0)
+        rel = (cell - np.repeat(vlo[part], cnt, axis=0)).astype(np.float32)
+        s = ck[:, 0] + np.einsum("ij,ij->i", rel, ck[:, 1:4])
+        x = ck[:, 4] + np.einsum("ij,ij->i", rel, ck[:, 5:8])
+        y = ck[:, 8] + np.einsum("ij,ij->i", rel, ck[:, 9:12])
+        # Partial-volume coverage of the voxel: exact along the segment (flat ends, so
+        # consecutive segments sum to 1), first-order signed distance across the ellipse.
+        cov = np.clip(np.minimum(s + 0.5, ck[:, 12]) - np.maximum(s - 0.5, 0.0), 0.0, 1.0)
+        rho = np.sqrt(x * x + y * y)
+        grad = np.sqrt((x * ck[:, 13]) ** 2 + (y * ck[:, 14]) ** 2)
+        dist = (rho - 1.0) * rho / np.maximum(grad, 1e-6)  # voxels, < 0 inside
+        cov *= np.clip(0.5 - dist, 0.0, 1.0)
+        keep = cov > 0
+        k, cell, cov = k[keep], cell[keep], cov[keep]
+        weight_sum += np.bincount(k, weights=cov, minlength=n)
+        c = cell - box_lo
+        hits.append((k, (c[:, 0] * sub_shape[1] + c[:, 1]) * sub_shape[2] + c[:, 2], cov))
+    share = np.divide(volume, weight_sum, out=np.zeros(n), where=weight_sum > 1e-9)
+    for k, flat, cov in hits:
+        acc += np.bincount(flat, weights=share[k] * cov, minlength=acc.size)
+    empty = weight_sum <= 1e-9
+    if np.any(empty):
+        c = mid[empty] - box_lo
+        flat = (c[:, 0] * sub_shape[1] + c[:, 1]) * sub_shape[2] + c[:, 2]
+        acc += np.bincount(flat, weights=volume[empty], minlength=acc.size)
+    box = tuple(slice(int(a), int(b) + 1) for a, b in zip(box_lo, box_hi, strict=True))
+    add = (acc.reshape(fill[box].shape) / grid.voxel_volume).astype(np.float32)
+    # A voxel belongs to the layer that brought most of its ink.
+    tags[box][add > fill[box]] = layer
+    fill[box] += add
+    return box_lo, box_hi
+
+
+def _spread_chunk(fill: NDArray[np.float32], tags: NDArray[np.int32], grid: VoxelGrid,
+                  box_lo: NDArray[np.int64], box_hi: NDArray[np.int64], layer: int,
+                  config: DepositionConfig) -> ChunkTrace:
+    """Push the excess of over-full voxels in the chunk box into nearby voxels with room.
+
+    The over-full voxels form connected regions (where a new filament overlaps older ink);
+    each region's total excess flows into the voxels with room nearest to it (a Euclidean
+    feature transform assigns every free voxel to its nearest over-full voxel, hence region),
+    nearest first, within reach of the neighbourhood margin. Gaps and grooves of the ink
+    (free voxels that a morphological closing of the ink fills, up to ``config.gap_mm`` wide)
+    are filled first: the immiscible ink wets them to shrink its interface with the gel.
+    Only excess that finds no gap within reach goes into open gel. What a region cannot place
+    goes on in another pass; when a neighbourhood runs out of room it is enlarged (doubled) up
+    to the whole grid. Voxels receiving ink are tagged with ``layer``.
+    """
+    shape = np.asarray(grid.shape)
+    vox = grid.voxel
+    margin = max(1, int(np.ceil(config.spread_margin_mm / vox)))
+    displaced: float | None = None
+    passes = 0
+    max_spread = 0.0
+    structure = np.ones((3, 3, 3), dtype=bool)
+    closing = round(0.5 * config.gap_mm / vox)
+    # Only the part of the chunk box that holds over-full voxels matters (plus the margin).
+    chunk = tuple(slice(int(a), int(b) + 1) for a, b in zip(box_lo, box_hi, strict=True))
+    over_any = fill[chunk] > OVERFULL
+    if not np.any(over_any):
+        return ChunkTrace(layer, 0, 0.0, 0.0, 0, 0.0, 0.0)
+    for axis in range(3):
+        other = tuple(a for a in range(3) if a != axis)
+        hit = np.flatnonzero(over_any.any(axis=other))
+        box_hi = box_hi.copy()
+        box_hi[axis] = box_lo[axis] + hit[-1]
+        box_lo = box_lo.copy()
+        box_lo[axis] = box_lo[axis] + hit[0]
+    while True:
+        lo = np.maximum(box_lo - margin, 0)
+        hi = np.minimum(box_hi + margin, shape - 1)
+        sl = tuple(slice(int(a), int(b) + 1) for a, b in zip(lo, hi, strict=True))
+        f = fill[sl]
+        reach2 = margin**2
+        wetting = closing > 0
+        passes_here = 0
+        # Gaps and grooves: free voxels a morphological closing of the ink bridges (computed
+        # once per neighbourhood: the passes only fill them, they do not move).
+        gaps = closing_cube(f >= 0.5, closing) if wetting else None
+        f_all, gaps_all, sl_all = f, gaps, sl
+        for _ in range(config.max_passes):
+            over_all = f_all > OVERFULL
+            if not np.any(over_all):
+                break
+            # Work on the over-full voxels' box plus the reach only.
+            sub = _crop(over_all, margin)
+            f = f_all[sub]
+            over = over_all[sub]
+            gaps = gaps_all[sub] if gaps_all is not None else None
+            sl = tuple(slice(a.start + s.start, a.start + s.stop)
+                       for a, s in zip(sl_all, sub, strict=True))
+            room = f < FULL
+            if wetting and gaps is not None and passes_here == 0:
+                room &= gaps
+            if not np.any(room):
+                if wetting:
+                    wetting = False
+                    continue
+                break
+            passes += 1
+            passes_here += 1
+            over_idx = np.nonzero(over)
+            excess = f[over_idx].astype(np.float64) - 1.0
+            if displaced is None:
+                displaced = float(excess.sum()) * grid.voxel_volume
+            region_map, n_regions = ndimage.label(over, structure=structure)
+            region = region_map[over_idx]
+            region_excess = np.bincount(region, weights=excess, minlength=n_regions + 1)
+            nearest = ndimage.distance_transform_edt(~over, return_distances=False,
+                                                     return_indices=True)
+            room_idx = np.nonzero(room)
+            own = tuple(nearest[a][room_idx] for a in range(3))
+            del nearest
+            d2 = sum((own[a] - room_idx[a]).astype(np.int64) ** 2 for a in range(3))
+            near = d2 <= reach2
+            owner = region_map[tuple(o[near] for o in own)]
+            dst = tuple(r[near] for r in room_idx)
+            d2 = d2[near]
+            if gaps is not None:
+                # After the first (gaps only) pass: a region's remaining gaps, then open gel.
+                tier = (~gaps[dst]).astype(np.int8)
+                order = np.lexsort((d2, tier, owner))
+            else:
+                order = np.lexsort((d2, owner))
+            owner, d2 = owner[order], d2[order]
+            dst = tuple(a[order] for a in dst)
+            cap = 1.0 - f[dst].astype(np.float64)
+            # Fill each region's candidates in order: cumulative capacity per region group.
+            cum = np.cumsum(cap)
+            if owner.size:
+                starts = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
+                first = np.repeat(cum[starts] - cap[starts], np.diff(np.r_[starts, owner.size]))
+            else:
+                first = np.zeros(0)
+            take = np.clip(region_excess[owner] - (cum - cap - first), 0.0, cap)
+            moved = take > 0
+            if not np.any(moved):
+                if wetting:
+                    wetting = False
+                    continue
+                break
+            max_spread = max(max_spread, float(np.sqrt(d2[moved].max())) * vox)
+            placed = np.bincount(owner, weights=take, minlength=n_regions + 1)
+            share = np.divide(placed, region_excess, out=np.zeros_like(placed),
+                              where=region_excess > 0)
+            got = tuple(a[moved] for a in dst)
+            gained = take[moved].astype(np.float32)
+            major = gained > f[got]
+            tags[sl][tuple(a[major] for a in got)] = layer
+            f[got] += gained
+            f[over_idx] -= (excess * share[region]).astype(np.float32)
+        f, gaps, sl = f_all, gaps_all, sl_all
+        whole = bool(np.all(lo == 0) and np.all(hi == shape - 1))
+        if whole or not np.any(f > OVERFULL):
+            break
+        margin *= 2
+    residual = float(np.clip(f - 1.0, 0.0, None).sum(dtype=np.float64)) * grid.voxel_volume
+    return ChunkTrace(layer=layer, segments=0, volume_mm3=0.0, displaced_mm3=displaced or 0.0,
+                      passes=passes, max_spread_mm=max_spread, residual_mm3=residual)
+
+
+def _crop(mask: NDArray[np.bool_], pad: int) -> tuple[slice, slice, slice]:
+    """Slices of the bounding box of ``mask`` (non-empty) grown by ``pad``, clipped to it."""
+    out = []
+    for axis in range(3):
+        other = tuple(a for a in range(3) if a != axis)
+        hit = np.flatnonzero(mask.any(axis=other))
+        out.append(slice(max(int(hit[0]) - pad, 0), min(int(hit[-1]) + pad + 1, mask.shape[axis])))
+    return out[0], out[1], out[2]
+
+
+def covering_grid(toolpath: Toolpath, morphology: Morphology,
+                  extra: NDArray[np.float64] | None = None,
+                  config: DepositionConfig | None = None) -> VoxelGrid:
+    """The grid holding every filament of ``toolpath`` and the box ``extra`` ((2, 3) mm).
+
+    Raises:
+        InputError: the grid would be too large for ``config.voxel_mm``.
+    """
+    config = config or DepositionConfig()
+    box = job_bounds(extrusion_segments(toolpath, morphology))
+    if extra is not None:
+        extra = np.asarray(extra, dtype=np.float64)
+        box = np.stack([np.minimum(box[0], extra[0]), np.maximum(box[1], extra[1])])
+    return VoxelGrid.around(box[0], box[1], config.voxel_mm, config.pad_mm)

@@ -1,0 +1,110 @@
+"""Pictures of a simulated print (PNG, matplotlib Agg): CT-like slices and the error map."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+
+from sim.deposition import Deposit
+from sim.metrics import Quality
+
+
+def ct_slices(path: Path, deposit: Deposit, quality: Quality, title: str = "",
+              fractions: Sequence[float] = (0.25, 0.5, 0.75)) -> Path:
+    """Save horizontal slices (at height fractions of the model) and a vertical XZ slice.
+
+    Ink is white, gel black (like a CT), the model outline red, pores marked blue.
+    """
+    grid = deposit.grid
+    fill = np.clip(deposit.fill, 0.0, 1.0)
+    zs = np.flatnonzero(quality.inside.any(axis=(0, 1)))
+    ys = np.flatnonzero(quality.inside.any(axis=(0, 2)))
+    if zs.size == 0:
+        zs, ys = np.arange(grid.shape[2]), np.arange(grid.shape[1])
+    ks = [int(zs[0] + f * (zs[-1] - zs[0])) for f in fractions]
+    j = int(0.5 * (ys[0] + ys[-1]))
+    x, y, z = (grid.axis_centers(a) for a in range(3))
+    fig, axes = plt.subplots(1, len(ks) + 1, figsize=(4.2 * (len(ks) + 1), 4.4))
+    views = [(fill[:, :, k], quality.inside[:, :, k], quality.pores[:, :, k], x, y,
+              f"z = {z[k]:.1f} mm", ("x mm", "y mm")) for k in ks]
+    views.append((fill[:, j, :], quality.inside[:, j, :], quality.pores[:, j, :], x, z,
+                  f"y = {y[j]:.1f} mm", ("x mm", "z mm")))
+    for ax, (img, ins, por, u, v, label, names) in zip(axes, views, strict=True):
+        ext = (u[0], u[-1], v[0], v[-1])
+        ax.imshow(img.T, origin="lower", cmap="gray", vmin=0, vmax=1, extent=ext,
+                  interpolation="nearest")
+        if ins.any() and not ins.all():
+            ax.contour(u, v, ins.T.astype(float), levels=[0.5], colors="red", linewidths=0.8)
+        if por.any():
+            pu, pv = np.nonzero(por)
+            ax.plot(u[pu], v[pv], "s", color="tab:blue", markersize=1.5, alpha=0.7)
+        ax.set_title(label)
+        ax.set_xlabel(names[0])
+        ax.set_ylabel(names[1])
+        ax.set_aspect("equal")
+    fig.suptitle(title or "simulated CT slices (white ink, black gel, red model, blue pores)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def error_map(path: Path, quality: Quality, title: str = "", limit_mm: float | None = None,
+              max_points: int = 6000) -> Path:
+    """Save the signed surface error on the model surface (two 3D views) and its histogram."""
+    pts = quality.surface.map_points
+    d = quality.surface.map_distance
+    if len(pts) > max_points:  # 3D scatter cost grows with the point count
+        pick = np.random.default_rng(0).choice(len(pts), max_points, replace=False)
+        pts, d = pts[pick], d[pick]
+    finite = np.isfinite(d)
+    lim = limit_mm or (float(np.percentile(np.abs(d[finite]), 98)) if finite.any() else 1.0)
+    lim = max(lim, 1e-3)
+    fig = plt.figure(figsize=(15, 5.2))
+    grid = fig.add_gridspec(1, 5, width_ratios=[1.4, 1.4, 0.05, 0.22, 1.1], wspace=0.08,
+                            left=0.01, right=0.97, top=0.88, bottom=0.12)
+    for i, (elev, azim) in enumerate(((25, -60), (-25, 120))):
+        ax3 = fig.add_subplot(grid[0, i], projection="3d")
+        sc = ax3.scatter(pts[:, 0], pts[:, 1], pts[:, 2], c=np.clip(d, -lim, lim), s=3,
+                         cmap="coolwarm", vmin=-lim, vmax=lim)
+        ax3.view_init(elev=elev, azim=azim)
+        ax3.set_box_aspect(tuple(np.ptp(pts, axis=0) + 1e-9))
+        ax3.set_axis_off()
+    fig.colorbar(sc, cax=fig.add_subplot(grid[0, 2]), label="print - model (mm)")
+    ax = fig.add_subplot(grid[0, 4])
+    err = np.abs(quality.surface.distance)
+    if err.size:
+        ax.hist(err, bins=60, color="tab:gray")
+    s = quality.surface.stats()
+    ax.set_title(f"|error| mean {s['mean']:.3f}  p95 {s['p95']:.3f}  max {s['max']:.3f} mm")
+    ax.set_xlabel("distance of printed surface to model (mm)")
+    fig.suptitle(title or "surface error on the model (red: ink outside, blue: short)")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)
+
+
+def layer_plot(path: Path, quality: Quality, baseline: Quality | None = None,
+               labels: tuple[str, str] = ("multi-axis", "planar")) -> Path:
+    """Save over/under-deposition per layer (and of a baseline, if given)."""
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for q, name, style in ((quality, labels[0], "-"), (baseline, labels[1], "--")):
+        if q is None or q.layers is None or q.layers.layer.size == 0:
+            continue
+        under, over = q.layers.ratios()
+        ax.plot(q.layers.layer, 100 * over, style, color="tab:red", label=f"{name} over")
+        ax.plot(q.layers.layer, 100 * under, style, color="tab:blue", label=f"{name} under")
+    ax.set_xlabel("layer")
+    ax.set_ylabel("% of the layer's model volume")
+    ax.legend()
+    ax.set_title("over- and under-deposition per layer")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)

@@ -1,0 +1,148 @@
+"""Critical regions Omega: connected patches of boundary faces selected by normal cones.
+
+A region is one edge-connected patch of boundary faces whose outward normal lies within a
+selector's cone (design.md, ``--critical``). The slicing field is constant on each region
+(paper eq. 7) and the growth direction there follows the face normal (eq. 6):
+
+* a region whose area-weighted mean outward normal has z >= 0 is an *end* surface (e.g. the
+  rim of a socket): layers end there, growth = outward normal;
+* otherwise it is a *start* surface (e.g. a bottom): growth = -outward normal (into the part).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from slicer.config import CriticalSelector
+from slicer.operators import TetOperators
+
+MIN_REGION_FACES = 3
+
+
+class CriticalRegion(NamedTuple):
+    """One critical region Omega.
+
+    Attributes:
+        vertices: (k,) int64, mesh vertex indices on the region (sorted, unique).
+        faces: (m,) int64, indices into ``TetOperators.boundary``.
+        normals: (m, 3) float64, unit outward normal of each face.
+        growth: (m, 3) float64, unit growth direction of each face (+normal or -normal).
+        sign: float, +1.0 for an end surface (growth = outward normal), -1.0 for a start surface.
+        selector: str, the selector text that picked it.
+        area: float, mm^2, total face area.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    growth: np.ndarray
+    sign: float
+    selector: str
+    area: float
+
+
+class CriticalSelection(NamedTuple):
+    """The regions found and what happened on the way.
+
+    Attributes:
+        regions: the regions, in selector order, then by decreasing area.
+        notes: human-readable notes (dropped tiny patches, selectors with no match).
+    """
+
+    regions: tuple[CriticalRegion, ...]
+    notes: tuple[str, ...]
+
+
+def _edge_connected_patches(faces: np.ndarray) -> np.ndarray:
+    """Component label per face, faces connected when they share an edge.
+
+    Args:
+        faces: (m, 3) int, vertex indices.
+
+    Returns:
+        (m,) int64 component labels.
+    """
+    m = len(faces)
+    if m == 0:
+        return np.zeros(0, dtype=np.int64)
+    edges = np.sort(faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1).astype(np.int64)
+    owner = np.repeat(np.arange(m, dtype=np.int64), 3)
+    n = np.int64(edges.max() + 1)
+    key = edges[:, 0] * n + edges[:, 1]
+    order = np.argsort(key, kind="stable")
+    sk = key[order]
+    # Consecutive faces sharing an edge key get linked (a chain suffices for connectivity).
+    link = np.flatnonzero(sk[1:] == sk[:-1])
+    a, b = owner[order[link]], owner[order[link + 1]]
+    graph = sp.coo_matrix((np.ones(len(a)), (a, b)), shape=(m, m))
+    _, labels = connected_components(graph, directed=False)
+    return labels.astype(np.int64)
+
+
+def select_critical_regions(
+    ops: TetOperators,
+    selectors: Sequence[CriticalSelector],
+    min_faces: int = MIN_REGION_FACES,
+) -> CriticalSelection:
+    """Split the boundary faces within each selector's cone into edge-connected regions.
+
+    Args:
+        ops: the mesh operators (boundary faces with outward normals).
+        selectors: the parsed selectors.
+        min_faces: patches with fewer faces are dropped (noted in ``notes``).
+
+    Returns:
+        The regions and notes. A face matched by several selectors belongs to the first.
+    """
+    bnd = ops.boundary
+    taken = np.zeros(len(bnd), dtype=bool)
+    regions: list[CriticalRegion] = []
+    notes: list[str] = []
+    for sel in selectors:
+        axis = np.asarray(sel.direction, dtype=np.float64)
+        axis = axis / np.linalg.norm(axis)
+        cos_cone = np.cos(np.radians(sel.cone_deg))
+        chosen = np.flatnonzero((bnd.normal @ axis >= cos_cone) & ~taken)
+        if len(chosen) == 0:
+            notes.append(f"critical selector '{sel.text}' matched no boundary face")
+            continue
+        taken[chosen] = True
+        labels = _edge_connected_patches(bnd.faces[chosen])
+        counts = np.bincount(labels)
+        order = np.argsort(labels, kind="stable")
+        starts = np.concatenate([[0], np.cumsum(counts)])
+        found: list[CriticalRegion] = []
+        dropped = 0
+        for lab in range(len(counts)):  # loop over patches, not faces
+            idx = chosen[order[starts[lab]:starts[lab + 1]]]
+            if len(idx) < min_faces:
+                dropped += 1
+                continue
+            normals = bnd.normal[idx]
+            area = bnd.area[idx]
+            mean_normal = (normals * area[:, None]).sum(axis=0)
+            sign = 1.0 if mean_normal[2] >= 0 else -1.0
+            found.append(
+                CriticalRegion(
+                    vertices=np.unique(bnd.faces[idx]),
+                    faces=idx,
+                    normals=normals,
+                    growth=sign * normals,
+                    sign=sign,
+                    selector=sel.text,
+                    area=float(area.sum()),
+                )
+            )
+        if dropped:
+            notes.append(
+                f"critical selector '{sel.text}': dropped {dropped} patch(es) with fewer than "
+                f"{min_faces} faces"
+            )
+        found.sort(key=lambda r: -r.area)
+        regions.extend(found)
+    return CriticalSelection(regions=tuple(regions), notes=tuple(notes))

@@ -1,0 +1,118 @@
+"""Pictures of a slicing result (PNG, matplotlib Agg): a person reads these faster than numbers."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import LineCollection
+
+from slicer.stages import Layers
+
+
+def height_histogram(
+    initial: np.ndarray, final: np.ndarray, weights: np.ndarray, target: float, path: Path
+) -> Path:
+    """Histogram of layer height, initial (harmonic) vs final field.
+
+    Args:
+        initial: (T,) float64, mm, per-tet layer height of the initial field.
+        final: (T,) float64, mm, per-tet layer height of the final field.
+        weights: (T,) float64, mm^3, tet volumes.
+        target: float, mm, target layer height.
+        path: output PNG.
+    """
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=120)
+    both = np.concatenate([initial, final])
+    lo, hi = np.percentile(both, [0.5, 99.5])
+    bins = np.linspace(lo, hi, 60)
+    series = ((initial, "initial (harmonic)", "tab:grey"), (final, "final", "tab:blue"))
+    for values, label, colour in series:
+        mean = np.average(values, weights=weights)
+        std = np.sqrt(np.average((values - mean) ** 2, weights=weights))
+        ax.hist(
+            values,
+            bins=bins.tolist(),
+            weights=weights / weights.sum(),
+            alpha=0.6,
+            color=colour,
+            label=f"{label}: std {std:.3f} mm",
+        )
+    ax.axvline(target, color="k", linestyle="--", linewidth=1, label=f"target {target:.2f} mm")
+    ax.set_xlabel("layer height H (mm)")
+    ax.set_ylabel("volume fraction")
+    ax.set_title("Layer height distribution")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def convergence(o_align: Sequence[float], height_std: Sequence[float], path: Path) -> Path:
+    """O_align and layer-height std per iteration (paper Fig. 4e/f)."""
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=120)
+    its = np.arange(len(o_align))
+    ax.semilogy(its, np.maximum(np.asarray(o_align, float), 1e-300), "o-", color="tab:red")
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("O_align", color="tab:red")
+    if len(height_std):
+        twin = ax.twinx()
+        twin.plot(np.arange(len(height_std)), height_std, "s--", color="tab:blue")
+        twin.set_ylabel("layer height std (mm)", color="tab:blue")
+    ax.set_title("Convergence of the field iteration")
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def section_view(layers: Layers, path: Path, axis: int = 1) -> Path:
+    """Cut every layer with the mid plane normal to ``axis``; segments coloured by height."""
+    v = layers.vertices
+    faces = layers.faces
+    if len(faces) == 0:
+        raise ValueError("no layers to draw")
+    level = 0.5 * (v[:, axis].min() + v[:, axis].max())
+    s = v[faces, axis] - level  # (m, 3) signed distances of the face corners
+    # A face crosses the plane where exactly one or two corners lie above it.
+    above = s > 0
+    crossing = above.any(axis=1) & ~above.all(axis=1)
+    f = faces[crossing]
+    sf = s[crossing]
+    # For each of the three edges, an intersection point exists where the signs differ.
+    ends = []
+    valid = []
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        sa, sb = sf[:, a], sf[:, b]
+        hit = (sa > 0) != (sb > 0)
+        t = np.where(hit, sa / np.where(hit, sa - sb, 1.0), 0.0)
+        p = v[f[:, a]] + t[:, None] * (v[f[:, b]] - v[f[:, a]])
+        ends.append(p)
+        valid.append(hit)
+    ends_arr = np.stack(ends, axis=1)  # (k, 3 edges, 3)
+    valid_arr = np.stack(valid, axis=1)  # (k, 3)
+    order = np.argsort(~valid_arr, axis=1, kind="stable")[:, :2]
+    seg = np.take_along_axis(ends_arr, order[:, :, None], axis=1)  # (k, 2, 3)
+    other = [i for i in range(3) if i != axis]
+    seg2 = seg[:, :, other]
+    colour = layers.vertex_height[f].mean(axis=1)
+    fig, ax = plt.subplots(figsize=(6.0, 6.0), dpi=130)
+    lc = LineCollection(list(seg2), array=colour, cmap="viridis", linewidths=0.6)
+    ax.add_collection(lc)
+    ax.autoscale()
+    ax.set_aspect("equal")
+    names = "xyz"
+    ax.set_xlabel(f"{names[other[0]]} (mm)")
+    ax.set_ylabel(f"{names[other[1]]} (mm)")
+    ax.set_title(f"Layers cut at {names[axis]} = {level:.1f} mm ({layers.layer_count} layers)")
+    fig.colorbar(lc, ax=ax, label="layer height H (mm)", shrink=0.8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return path

@@ -1,0 +1,351 @@
+"""Curved layers: iso-values of the slicing field and marching-tetrahedra extraction.
+
+* ``layer_spacing``: L = round((g_max - g_min) / delta) layers at g_min + (k + 0.5) * delta',
+  delta' = (g_max - g_min) / L, so the layers fill the part evenly and the physical mean
+  height stays at the target up to the factor delta' / delta (reported as ``mean_height_mm``).
+* ``extract_layers``: the stage entry point: spacing, extraction, the critical-region and
+  layer-height checks, in one ``LayerExtraction``.
+* ``iso_surfaces``: marching tetrahedra, one layer at a time (no loop over tets inside a
+  layer). A vertex sits on each crossed tet edge, shared by all tets around that edge (welded).
+  Faces are oriented so their normal points along increasing g (the growth direction); quads
+  are split into two triangles. Per vertex: direction = normalised area-weighted mean of the
+  gradients of the tets its faces cut, height H = delta' / |that mean gradient| (mm).
+* ``layer_gap``: the measured distance from layer k's vertices to the surface of layer k + 1,
+  to check H against geometry.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from slicer.config import SlicingConfig
+from slicer.errors import InputError
+from slicer.field import FieldResult
+from slicer.operators import TET_EDGES, TetOperators, build_operators
+from slicer.progress import NullProgress, Progress
+from slicer.stages import Field, Layers, TetMesh
+from slicer.tolerance import tol
+
+
+class LayerSpacing(NamedTuple):
+    """How the iso-values were chosen.
+
+    Attributes:
+        iso: (L,) float64, iso-values in increasing order (field units).
+        delta: float, requested spacing (gives the target mean height exactly).
+        delta_used: float, delta' = (g_max - g_min) / L actually used.
+        mean_height_mm: float, mm, resulting volume-weighted mean physical layer height
+            (target * delta' / delta).
+    """
+
+    iso: np.ndarray
+    delta: float
+    delta_used: float
+    mean_height_mm: float
+
+
+def layer_spacing(g: np.ndarray, delta: float, layer_height_mm: float) -> LayerSpacing:
+    """Iso-values for a field whose spacing ``delta`` gives mean height ``layer_height_mm``.
+
+    Args:
+        g: (V,) float64, field values.
+        delta: float > 0, field units per target layer height (``FieldResult.delta``).
+        layer_height_mm: float, mm, the target mean layer height.
+
+    Returns:
+        The spacing (at least one layer).
+    """
+    g_min, g_max = float(np.min(g)), float(np.max(g))
+    span = g_max - g_min
+    if not np.isfinite(delta) or delta <= 0 or span <= 0:
+        return LayerSpacing(np.array([g_min + 0.5 * span]), float(delta), span,
+                            float("nan"))
+    count = max(1, round(span / delta))
+    used = span / count
+    iso = g_min + (np.arange(count) + 0.5) * used
+    return LayerSpacing(iso, float(delta), used, layer_height_mm * used / delta)
+
+
+def field_stage(result: FieldResult, layer_height_mm: float) -> tuple[Field, LayerSpacing]:
+    """The ``field.npz`` stage of a field result, with its spacing."""
+    spacing = layer_spacing(result.g, result.delta, layer_height_mm)
+    return Field(g=result.g, iso=spacing.iso), spacing
+
+
+def _case_table() -> np.ndarray:
+    """(16, 2, 3) int64: for each above/below pattern, up to two triangles of local edges.
+
+    Pattern bit k is set when tet vertex k is above the iso-value; -1 marks no triangle.
+    """
+    edge_of = {(int(a), int(b)): i for i, (a, b) in enumerate(TET_EDGES)}
+
+    def e(a: int, b: int) -> int:
+        return edge_of[(min(a, b), max(a, b))]
+
+    table = np.full((16, 2, 3), -1, dtype=np.int64)
+    for mask in range(16):  # 16 patterns, built once at import
+        up = [k for k in range(4) if mask >> k & 1]
+        down = [k for k in range(4) if not mask >> k & 1]
+        if len(up) in (1, 3):
+            apex, others = (up[0], down) if len(up) == 1 else (down[0], up)
+            table[mask, 0] = [e(apex, o) for o in others]
+        elif len(up) == 2:
+            (a1, a2), (b1, b2) = up, down
+            quad = [e(a1, b1), e(a1, b2), e(a2, b2), e(a2, b1)]
+            table[mask, 0] = [quad[0], quad[1], quad[2]]
+            table[mask, 1] = [quad[0], quad[2], quad[3]]
+    return table
+
+
+_CASES = _case_table()
+
+
+class _Edges(NamedTuple):
+    ends: np.ndarray  # (E, 2) int64 vertex indices of each unique edge
+    of_tet: np.ndarray  # (T, 6) int64 unique-edge id of each local tet edge
+
+
+def _unique_edges(tets: np.ndarray, n_vertices: int) -> _Edges:
+    pairs = np.sort(tets[:, TET_EDGES].reshape(-1, 2), axis=1).astype(np.int64)
+    key = pairs[:, 0] * np.int64(n_vertices) + pairs[:, 1]
+    _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    return _Edges(ends=pairs[first], of_tet=inverse.reshape(-1, 6).astype(np.int64))
+
+
+def iso_surfaces(mesh: TetOperators | TetMesh, field: Field,
+                 progress: Progress | None = None) -> Layers:
+    """Marching-tetrahedra extraction of every iso-surface of ``field`` on a tet mesh.
+
+    Args:
+        mesh: the tet mesh the field lives on, or its operators (``FieldResult.operators``,
+            saves rebuilding them).
+        field: g (V,) and the increasing iso-values (L,).
+
+    Returns:
+        All layers in one ``Layers`` stage; layer k is the iso-surface ``g = iso[k]`` (all its
+        connected components). vertex_height is delta' / |grad g| with delta' the spacing of
+        the iso-values (mean spacing if they are not uniform).
+    """
+    ops = mesh if isinstance(mesh, TetOperators) else build_operators(mesh)
+    if len(field.g) != ops.n_vertices:
+        raise InputError(f"the field has {len(field.g)} values for {ops.n_vertices} vertices",
+                         "re-run the slicing stage on this tet mesh")
+    g = np.asarray(field.g, dtype=np.float64)
+    iso = np.asarray(field.iso, dtype=np.float64)
+    x = ops.vertices
+    tets = ops.tets
+    gt = g[tets]
+    tmin, tmax = gt.min(axis=1), gt.max(axis=1)
+    by_min = np.argsort(tmin, kind="stable")
+    sorted_min = tmin[by_min]
+    edges = _unique_edges(tets, ops.n_vertices)
+    grad = ops.gradient(g)
+    span = float(g.max() - g.min()) if len(g) else 0.0
+    spacing = float(np.diff(iso).mean()) if len(iso) > 1 else span
+
+    out_v: list[np.ndarray] = []
+    out_f: list[np.ndarray] = []
+    out_l: list[np.ndarray] = []
+    out_h: list[np.ndarray] = []
+    out_d: list[np.ndarray] = []
+    offset = 0
+    weights = np.array([1, 2, 4, 8])
+    prog: Progress = progress if progress is not None else NullProgress()
+    for k, level in enumerate(iso):  # one pass per layer; vectorised over tets inside
+        if k % 16 == 0:
+            prog.update(k / max(len(iso), 1), f"layer {k}/{len(iso)}")
+        c = float(level)
+        # Keep the iso-value off mesh vertices (a vertex exactly on it would give welded
+        # duplicates of zero length).
+        if np.any(np.abs(g - c) <= tol.iso * max(span, 1.0)):
+            c += 2 * tol.iso * max(span, 1.0)
+        head = by_min[: np.searchsorted(sorted_min, c, side="left")]
+        cut = head[tmax[head] > c]
+        if len(cut) == 0:
+            continue
+        mask = (gt[cut] > c) @ weights
+        tri_local = _CASES[mask]  # (n, 2, 3)
+        valid = tri_local[:, :, 0] >= 0
+        tet_of_tri = np.broadcast_to(cut[:, None], valid.shape)[valid]
+        local = tri_local[valid]  # (m, 3)
+        edge_ids = np.take_along_axis(edges.of_tet[tet_of_tri], local, axis=1)
+        used, inverse = np.unique(edge_ids, return_inverse=True)
+        faces = inverse.reshape(-1, 3)
+        a, b = edges.ends[used, 0], edges.ends[used, 1]
+        t = (c - g[a]) / (g[b] - g[a])
+        verts = x[a] + t[:, None] * (x[b] - x[a])
+        # Orient along the growth direction (the cut tet's gradient).
+        p = verts[faces]
+        normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        flip = np.einsum("ij,ij->i", normal, grad[tet_of_tri]) < 0
+        faces[flip] = faces[flip][:, [0, 2, 1]]
+        # Area weights, with a floor so a vertex touched only by sliver faces still gets the
+        # mean gradient of its tets.
+        area = 0.5 * np.linalg.norm(normal, axis=1)
+        area = area + 1e-9 * float(area.mean()) + tol.zero
+        corner = faces.ravel()
+        nv = len(used)
+        wsum = np.bincount(corner, weights=np.repeat(area, 3), minlength=nv)
+        weighted = area[:, None] * grad[tet_of_tri]
+        mean_grad = np.column_stack([
+            np.bincount(corner, weights=np.repeat(weighted[:, i], 3), minlength=nv)
+            for i in range(3)
+        ]) / wsum[:, None]
+        norm = np.linalg.norm(mean_grad, axis=1)
+        direction = mean_grad / np.maximum(norm, tol.zero)[:, None]
+        height = spacing / np.maximum(norm, tol.zero)
+        out_v.append(verts)
+        out_f.append(faces + offset)
+        out_l.append(np.full(len(faces), k, dtype=np.int32))
+        out_h.append(height)
+        out_d.append(direction)
+        offset += len(verts)
+
+    if not out_v:
+        empty = np.zeros((0, 3))
+        return Layers(vertices=empty, faces=np.zeros((0, 3), dtype=np.int32),
+                      face_layer=np.zeros(0, dtype=np.int32), vertex_height=np.zeros(0),
+                      vertex_direction=empty)
+    return Layers(
+        vertices=np.concatenate(out_v),
+        faces=np.concatenate(out_f),
+        face_layer=np.concatenate(out_l),
+        vertex_height=np.concatenate(out_h),
+        vertex_direction=np.concatenate(out_d),
+    )
+
+
+def layer_gap(layers: Layers, index: int) -> tuple[np.ndarray, np.ndarray]:
+    """Measured vs reported height for the vertices of layer ``index``.
+
+    Args:
+        layers: the extracted layers.
+        index: a layer that has a next layer (index + 1 < layer_count).
+
+    Returns:
+        (measured (n,) float64 mm: distance from each vertex of layer ``index`` to the closest
+        point of layer ``index + 1``; reported (n,) float64 mm: their ``vertex_height``).
+    """
+    import igl
+
+    lower, upper = layers.layer(index), layers.layer(index + 1)
+    sq, _, _ = igl.point_mesh_squared_distance(
+        np.ascontiguousarray(lower.vertices), np.ascontiguousarray(upper.vertices),
+        np.ascontiguousarray(upper.faces.astype(np.int64)))
+    return np.sqrt(np.asarray(sq)), np.asarray(lower.height)
+
+
+GAP_CHECK_PAIRS = 12  # layer pairs measured by the height check (evenly spread)
+
+
+@dataclass(frozen=True, eq=False)
+class LayerExtraction:
+    """The layers stage and its checks.
+
+    Attributes:
+        field: the ``field.npz`` stage (g and iso-values).
+        layers: the ``layers.npz`` stage.
+        spacing: how the iso-values were chosen (delta', resulting mean height).
+        critical_report: one JSON-ready dict per critical region: selector, kind ("start" or
+            "end"), faces, vertices, area_mm2, g, slot (the region lies between iso[slot - 1]
+            and iso[slot]), on_one_layer (all its vertices in that same slot).
+        height_check: JSON-ready dict comparing each vertex's reported height with the
+            measured distance to the next layer: pairs, vertices, median_rel_error,
+            p90_rel_error.
+    """
+
+    field: Field
+    layers: Layers
+    spacing: LayerSpacing
+    critical_report: list[dict[str, object]]
+    height_check: dict[str, float]
+
+
+def check_heights(layers: Layers, pairs: int = GAP_CHECK_PAIRS) -> dict[str, float]:
+    """Relative error |measured - reported| / reported of vertex heights on sample layers.
+
+    Args:
+        layers: the extracted layers.
+        pairs: how many consecutive layer pairs to measure (evenly spread).
+
+    Returns:
+        {"pairs", "vertices", "median_rel_error", "p90_rel_error"} (NaN errors if fewer than
+        two layers).
+    """
+    count = layers.layer_count
+    if count < 2:
+        nan = float("nan")
+        return {"pairs": 0, "vertices": 0, "median_rel_error": nan, "p90_rel_error": nan}
+    chosen = np.unique(np.linspace(0, count - 2, min(pairs, count - 1)).round().astype(int))
+    errors = []
+    for k in chosen:  # a few layer pairs
+        measured, reported = layer_gap(layers, int(k))
+        errors.append(np.abs(measured - reported) / np.maximum(reported, tol.zero))
+    err = np.concatenate(errors)
+    return {"pairs": len(chosen), "vertices": len(err),
+            "median_rel_error": float(np.median(err)),
+            "p90_rel_error": float(np.percentile(err, 90))}
+
+
+def _critical_report(result: FieldResult, iso: np.ndarray) -> list[dict[str, object]]:
+    out: list[dict[str, object]] = []
+    for region in result.regions.regions:  # a handful of regions
+        slots = np.unique(np.searchsorted(iso, result.g[region.vertices]))
+        out.append({
+            "selector": region.selector,
+            "kind": "end" if region.sign > 0 else "start",
+            "faces": len(region.faces),
+            "vertices": len(region.vertices),
+            "area_mm2": region.area,
+            "g": float(result.g[region.vertices[0]]),
+            "slot": int(slots[0]),
+            "on_one_layer": len(slots) == 1,
+        })
+    return out
+
+
+def extract_layers(
+    mesh: TetMesh | TetOperators,
+    source: FieldResult | Field,
+    config: SlicingConfig | None = None,
+    progress: Progress | None = None,
+) -> LayerExtraction:
+    """The layers of a slicing field: iso-values, marching tets, and the checks.
+
+    Args:
+        mesh: the tet mesh (its operators are reused from ``source`` when it is a result).
+        source: a field result (iso-values from its ``delta`` and the target height) or an
+            existing ``Field`` stage (its iso-values are used as they are).
+        config: slicing settings; its ``layer_height_mm`` overrides the result's target.
+        progress: receives the stage start/end and per-layer progress.
+
+    Returns:
+        The extraction (field and layers stages, spacing, critical-region and height checks).
+    """
+    prog: Progress = progress if progress is not None else NullProgress()
+    start = time.perf_counter()
+    prog.start("layers")
+    if isinstance(source, FieldResult):
+        target = config.layer_height_mm if config is not None else source.layer_height_mm
+        field, spacing = field_stage(source, target)
+        ops = source.operators
+        if len(source.g) != (len(mesh.vertices) if isinstance(mesh, TetMesh)
+                             else mesh.n_vertices):
+            raise InputError("the field result belongs to another tet mesh",
+                             "re-run the slicing stage on this tet mesh")
+        regions = _critical_report(source, field.iso)
+    else:
+        field = source
+        ops = mesh if isinstance(mesh, TetOperators) else build_operators(mesh)
+        used = float(np.diff(field.iso).mean()) if len(field.iso) > 1 else float("nan")
+        spacing = LayerSpacing(np.asarray(field.iso), float("nan"), used, float("nan"))
+        regions = []
+    layers = iso_surfaces(ops, field, progress=prog)
+    check = check_heights(layers)
+    prog.end("layers", time.perf_counter() - start)
+    return LayerExtraction(field=field, layers=layers, spacing=spacing,
+                           critical_report=regions, height_check=check)

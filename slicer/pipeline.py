@@ -1,0 +1,197 @@
+"""The slicing pipeline: model file -> TetMesh -> Field + Layers -> Toolpath, with report.
+
+Each stage is computed from the previous stage's value and saved to its file in the job
+directory as soon as it exists, so an interrupted run loses nothing already computed.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import tomli_w
+import trimesh
+
+from slicer.artifacts import atomic_write_bytes
+from slicer.config import JobConfig
+from slicer.configtools import to_dict
+from slicer.errors import InputError
+from slicer.mesh_io import Surface
+from slicer.progress import Progress, StageTimer
+from slicer.report import update_report
+from slicer.stages import Layers, TetMesh
+
+Until = Literal["tetmesh", "layers", "toolpath"]
+
+
+def slice_model(
+    model: Path,
+    out_dir: Path,
+    job: JobConfig,
+    progress: Progress | None = None,
+    until: Until = "toolpath",
+) -> dict[str, Any]:
+    """Slice ``model`` into ``out_dir``; returns the report written to ``report.json``."""
+    from slicer import mesh_io, tetrahedralize
+
+    model = Path(model)
+    out_dir = Path(out_dir)
+    _prepare_out_dir(out_dir)
+    timer = StageTimer(progress)
+    t0 = time.perf_counter()
+    report: dict[str, Any] = {"job": {"model_file": str(model), "config": to_dict(job)}}
+    atomic_write_bytes(out_dir / "job.toml", tomli_w.dumps(to_dict(job)).encode())
+
+    with timer.stage("load"):
+        if model.suffix.lower() in mesh_io.TET_SUFFIXES:
+            given: TetMesh | None = mesh_io.load_tet_mesh(model, units=job.model)
+            surface = _boundary_surface(given, model)  # type: ignore[arg-type]
+        else:
+            given = None
+            surface = mesh_io.load_surface(model, units=job.model)
+        _save_surface(surface, out_dir / "model.ply")
+    report["model"] = {
+        "volume_mm3": surface.volume_mm3,
+        "bbox_mm": list(surface.bbox_mm),
+        "repairs": list(surface.notes),
+    }
+
+    with timer.stage("tetrahedralize"):
+        if given is None:
+            tetmesh, stats = tetrahedralize.tetrahedralize(surface, job.mesh, progress)
+        else:
+            tetmesh = given
+            stats = tetrahedralize.quality(tetmesh.vertices, tetmesh.tets, surface.volume_mm3)
+        tetmesh.save(out_dir)
+    report["mesh"] = {
+        "tets": len(tetmesh.tets),
+        "vertices": len(tetmesh.vertices),
+        "given": given is not None,
+        **stats.as_dict(),
+    }
+    if until == "tetmesh":
+        return _finish(out_dir, report, timer, t0)
+
+    with timer.stage("slicing"):
+        slicing_report, layers = _slice(tetmesh, job, out_dir, progress)
+    report["slicing"] = slicing_report
+    if until == "layers":
+        return _finish(out_dir, report, timer, t0)
+
+    with timer.stage("toolpath"):
+        report["toolpath"] = _toolpath(layers, job, out_dir, surface.volume_mm3, progress)
+    return _finish(out_dir, report, timer, t0)
+
+
+def _boundary_surface(tetmesh: TetMesh, source: Path) -> Surface:
+    """The closed boundary of a given tet mesh, outward oriented, as the model surface."""
+    from slicer.operators import build_operators
+
+    boundary = build_operators(tetmesh).boundary
+    return Surface(vertices=tetmesh.vertices, faces=boundary.faces, source=source)
+
+
+def _save_surface(surface: Surface, path: Path) -> None:
+    """The model surface as sliced (mm, model frame), for inspection and viewers."""
+    mesh = trimesh.Trimesh(surface.vertices, surface.faces, process=False)
+    data = mesh.export(file_type="ply")
+    atomic_write_bytes(path, data if isinstance(data, bytes) else str(data).encode())
+
+
+def _prepare_out_dir(out_dir: Path) -> None:
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(
+            f"cannot create {out_dir} ({exc.strerror})", "choose another --out"
+        ) from exc
+    probe = out_dir / ".write-test"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise InputError(
+            f"cannot write into {out_dir} ({exc.strerror})", "choose another --out"
+        ) from exc
+
+
+def _slice(
+    tetmesh: TetMesh, job: JobConfig, out_dir: Path, progress: Progress | None
+) -> tuple[dict[str, Any], Layers]:
+    """Field optimisation and layer extraction, their files, pictures and report section."""
+    from slicer import field as field_mod
+    from slicer import figures
+    from slicer import layers as layers_mod
+    from slicer.layer_export import export_layers_ply
+
+    result = field_mod.compute_field(tetmesh, job.slicing, progress=progress)
+    extraction = layers_mod.extract_layers(tetmesh, result, job.slicing, progress=progress)
+    extraction.field.save(out_dir)
+    extraction.layers.save(out_dir)
+    export_layers_ply(extraction.layers, out_dir / "layers_ply")
+
+    initial = field_mod.height_stats(tetmesh, result.g0, job.slicing.layer_height_mm)
+    final = field_mod.height_stats(tetmesh, result.g, job.slicing.layer_height_mm)
+    fig_dir = out_dir / "figures"
+    fig_dir.mkdir(exist_ok=True)
+    figures.height_histogram(
+        initial.per_tet,
+        final.per_tet,
+        initial.volume,
+        job.slicing.layer_height_mm,
+        fig_dir / "layer_height_histogram.png",
+    )
+    figures.convergence(result.trace.o_align, result.trace.height_std, fig_dir / "convergence.png")
+    figures.section_view(extraction.layers, fig_dir / "section.png")
+
+    report = {
+        "layers": extraction.layers.layer_count,
+        "iterations": int(result.iterations),
+        "status": result.status,
+        "planar": job.slicing.planar,
+        "critical_regions": extraction.critical_report,
+        "height_mm": final.summary(),
+        "height_std_initial_mm": initial.summary()["std"],
+        "height_initial_mm": initial.summary(),
+        "o_align": [float(x) for x in result.trace.o_align],
+        "height_std_per_iteration_mm": [float(x) for x in result.trace.height_std],
+        "layer_height_check": extraction.height_check,
+        "timing_s": dict(result.timings),
+    }
+    return report, extraction.layers
+
+
+def _toolpath(
+    layers: Layers, job: JobConfig, out_dir: Path, model_volume: float, progress: Progress | None
+) -> dict[str, Any]:
+    """Toolpath generation, its files, pictures and report section."""
+    from slicer.extrusion import load_profile
+    from slicer.toolpath.build import compute_toolpath
+    from slicer.toolpath.export import export_layers_txt
+    from slicer.toolpath.figures import write_toolpath_figures
+
+    profile = load_profile(job.extrusion.profile)
+    result = compute_toolpath(layers, job, profile, progress=progress)
+    result.toolpath.save(out_dir)
+    export_layers_txt(result.toolpath, out_dir / "layers_txt")
+    write_toolpath_figures(result, layers, out_dir / "figures")
+    report = dict(result.report)
+    deposited = float(report["deposited_volume_mm3"])
+    report["volume_error"] = deposited / model_volume - 1.0 if model_volume > 0 else float("nan")
+    return report
+
+
+def _finish(out_dir: Path, report: dict[str, Any], timer: StageTimer, t0: float) -> dict[str, Any]:
+    timing = {name: round(seconds, 3) for name, seconds in timer.seconds.items()}
+    timing["total"] = round(time.perf_counter() - t0, 3)
+    report["timing_s"] = timing
+    report["peak_memory_mb"] = _peak_memory_mb()
+    return update_report(out_dir, report)
+
+
+def _peak_memory_mb() -> float:
+    import resource
+
+    return float(np.round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1))

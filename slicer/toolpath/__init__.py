@@ -1,0 +1,8 @@
+"""Width-constrained toolpaths on curved layers (paper sections 3.2, 4.2, 4.3).
+
+Per-surface algorithms: ``lines`` (SurfaceLines), ``surface``, ``geodesic``, ``deform``,
+``isolines``, ``contours``, ``stripes``, ``width_error``. Assembly around them: ``mapback``
+(eqs. 15, 16), ``resample``, ``volume`` (volume matching of tau), ``ordering``, ``linking``,
+``build`` (``compute_toolpath``: the whole model), ``export`` (toolpath.npz, layer text
+files) and ``figures``. The extrusion model lives in ``slicer.extrusion``.
+"""

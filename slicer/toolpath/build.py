@@ -1,0 +1,848 @@
+"""Toolpath of the whole model: per layer component, width-constrained lines (paper 4.2, 4.3).
+
+Per layer (in parallel over chunks of layers):
+  pattern = first_pattern on even layers, the other one on odd layers (staggering, Fig. 3d);
+  per connected component of the layer:
+    W per vertex from H through the extrusion profile (eq. 4);
+    deform the component to constant width (eqs. 13, 14) when W varies by more than 1 %;
+    on the deformed surface: boundary distance, then contours (eq. 9) or stripes (eqs. 10-12)
+      at spacing tau * W_mean, mapped back to the original layer (eqs. 15, 16), short
+      fragments dropped, resampled at waypoint_spacing * W, ordered, linked;
+    tau by bisection until the deposited volume matches the integral of H (volume.py).
+  components in nearest-neighbour order, joined by lifted travel moves.
+Layers are concatenated in increasing order, joined by travel moves lifted above the layer
+just printed. Every waypoint carries H (interpolated from the face's vertices), the speed
+v = f(H / beta) and W = C / (H v), with H clamped to the profile's table (outside it the
+speed saturates and W = C / (H v) would diverge as H -> 0; the clamped H is the one stored, so
+eq. 4 holds per waypoint); travel waypoints copy H, v, W of their neighbour (the planner
+chooses the travel speed). The normal of a surface waypoint is the unit normal of its
+original face, oriented along growth (eq. 16). Open stripe lines that end on the boundary are
+cut back by W / 2 (at most a quarter of their length per end) so their band of material ends
+at the boundary. Thin components: a band with holes whose largest boundary distance is below
+THIN_BAND * W holds one line, printed along its middle (iso-line 1/2 of a harmonic function
+that is 0 on the outer and 1 on the inner boundary loops); when the volume of the regular
+pattern stays off by more than THIN_SHORTFALL, the other pattern and that centre line are
+tried and the closest volume wins (reported as 'thin_fallback'). A component that cannot be
+processed (no boundary, a solver failure) is skipped with its reason in the report instead
+of stopping the whole job.
+
+Limitation: travel clearance is measured against the current layer only (lifted above it);
+printed material of earlier layers that rises above the straight traverse between two far
+apart components of one layer is not detected (it would need the slicing field).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import threading
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slicer.config import JobConfig, ToolpathConfig
+from slicer.extrusion import ExtrusionProfile
+from slicer.progress import Progress
+from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, LayerMesh, Layers, Toolpath
+from slicer.tolerance import tol
+from slicer.toolpath.lines import SurfaceLines
+from slicer.toolpath.linking import (
+    EXTRUDE_FACTOR,
+    LIFT_FACTOR,
+    Lifter,
+    LinkedPath,
+    deposit_mask,
+    link_pieces,
+    mesh_graph,
+)
+from slicer.toolpath.mapback import face_normals, interpolate, map_back
+from slicer.toolpath.ordering import line_levels, order_lines
+from slicer.toolpath.resample import (
+    drop_short_lines,
+    face_neighbours,
+    line_index,
+    line_lengths,
+    resample_lines,
+)
+from slicer.toolpath.volume import (
+    VolumeMatch,
+    match_volume,
+    required_volume,
+    segment_volume,
+)
+
+PATTERN_NAMES = {PATTERN_CONTOUR: "contour", PATTERN_STRIPE: "stripe"}
+DEFORM_SPREAD = 0.01  # relative W spread above which the layer is deformed (eqs. 13, 14)
+SERIAL_BELOW = 4  # fewer layers than this are processed in the calling process
+THIN_SHORTFALL = 0.25  # volume error beyond this after matching -> try the thin-band options
+THIN_BAND = 0.6  # max boundary distance below this x W: a band for one line (centre line)
+
+
+def layer_pattern(index: int, first: str) -> int:
+    """Pattern of layer ``index``: ``first`` on even layers, the other on odd (Fig. 3d)."""
+    first_code = PATTERN_CONTOUR if first == "contour" else PATTERN_STRIPE
+    return first_code if index % 2 == 0 else 1 - first_code
+
+
+@dataclass(frozen=True, eq=False)
+class Waypoints:
+    """Waypoints in print order with their process values (one layer or component).
+
+    Attributes:
+        position: (N, 3) float64, mm.
+        normal: (N, 3) float64, unit.
+        height: (N,) float64, mm.
+        width: (N,) float64, mm.
+        speed: (N,) float64, mm/s.
+        extrude: (N,) bool.
+        path: (N,) int32, local path id, increasing in print order.
+        pattern: (N,) int8, 0 contour, 1 stripe (the pattern the waypoint belongs to).
+    """
+
+    position: NDArray[np.float64]
+    normal: NDArray[np.float64]
+    height: NDArray[np.float64]
+    width: NDArray[np.float64]
+    speed: NDArray[np.float64]
+    extrude: NDArray[np.bool_]
+    path: NDArray[np.int32]
+    pattern: NDArray[np.int8]
+
+    @staticmethod
+    def concat(parts: list[Waypoints]) -> Waypoints:
+        """Concatenate, shifting each part's path ids past the previous ones."""
+        if not parts:
+            return Waypoints(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros(0),
+                             np.zeros(0), np.zeros(0, bool), np.zeros(0, np.int32),
+                             np.zeros(0, np.int8))
+        offs, paths = 0, []
+        for p in parts:
+            paths.append(p.path + offs)
+            offs += int(p.path.max()) + 1 if len(p.path) else 0
+        return Waypoints(
+            position=np.concatenate([p.position for p in parts]),
+            normal=np.concatenate([p.normal for p in parts]),
+            height=np.concatenate([p.height for p in parts]),
+            width=np.concatenate([p.width for p in parts]),
+            speed=np.concatenate([p.speed for p in parts]),
+            extrude=np.concatenate([p.extrude for p in parts]),
+            path=np.concatenate(paths).astype(np.int32),
+            pattern=np.concatenate([p.pattern for p in parts]).astype(np.int8),
+        )
+
+    def deposited(self) -> NDArray[np.float64]:
+        """(N - 1,) float64, mm^3, volume of each segment (eq. 2)."""
+        return segment_volume(self.position, self.height, self.width,
+                              deposit_mask(self.extrude, self.path))
+
+
+@dataclass(frozen=True, eq=False)
+class ComponentResult:
+    """One layer component's toolpath and its measurements.
+
+    Attributes:
+        waypoints: the component's waypoints (surface and travel).
+        pattern: 0 contour, 1 stripe: the pattern used (a stripe layer's component too
+            narrow for stripes falls back to contours).
+        n_faces: faces of the component.
+        required_mm3: integral of H over the component.
+        deposited_mm3: deposited volume of the waypoints.
+        tau: chosen spacing factor.
+        volume_status: status of the bisection; volume_trace: (tau, volume, rel_error) rows.
+        deform_status: status of the width deformation ('skipped' when W is constant).
+        extrusion_starts: continuous extrusion paths in the component.
+        width_error: (k,) float64, |spacing - W| / W at the line points (deformed method).
+        width_error_undeformed: (k',) float64, same, lines computed on the original layer.
+        width_error_poisson: (k'',) float64, Poisson alternative (stripe layers), else empty.
+        timings: stage -> s.
+        error: why the component was skipped ('' if it was not).
+        fallback: '' or how a component too narrow for its pattern was printed instead
+            ('contour' on a stripe layer, 'centre-line': one line along the band's middle).
+    """
+
+    waypoints: Waypoints
+    pattern: int
+    n_faces: int
+    required_mm3: float
+    deposited_mm3: float
+    tau: float
+    volume_status: str
+    volume_trace: tuple[tuple[float, float, float], ...]
+    deform_status: str
+    extrusion_starts: int
+    width_error: NDArray[np.float64]
+    width_error_undeformed: NDArray[np.float64]
+    width_error_poisson: NDArray[np.float64]
+    timings: dict[str, float] = field(default_factory=dict)
+    error: str = ""
+    fallback: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class LayerResult:
+    """One layer's toolpath.
+
+    Attributes:
+        index: layer index.
+        pattern: 0 contour, 1 stripe.
+        waypoints: all components, joined by travel moves.
+        components: per-component results (print order).
+        surface_vertices: (n, 3) float64, mm, layer vertices (for travel clearance).
+        surface_normals: (n, 3) float64, unit growth direction per vertex.
+        lift: float, mm, travel clearance above this layer.
+        height_out_of_profile: int, vertices whose H lies outside the profile's table.
+        n_vertices: int, vertices of the layer.
+    """
+
+    index: int
+    pattern: int
+    waypoints: Waypoints
+    components: list[ComponentResult]
+    surface_vertices: NDArray[np.float64]
+    surface_normals: NDArray[np.float64]
+    lift: float
+    height_out_of_profile: int
+    n_vertices: int
+
+
+@dataclass(frozen=True, eq=False)
+class ToolpathResult:
+    """Output of ``compute_toolpath``.
+
+    Attributes:
+        toolpath: the Toolpath stage.
+        report: the design.md "toolpath" report section (+ extra keys).
+        layer_stats: per-layer dicts (layer, pattern, components, volumes, tau, starts).
+        width_errors: {"contour"|"stripe": {"deformed"|"undeformed"|"poisson": (k,) f8}}.
+        status: 'ok'; 'volume' when some component missed the volume tolerance;
+            'failed-components' when some component was skipped (reasons in the report).
+        timings: stage -> s (summed over layers for per-layer stages).
+    """
+
+    toolpath: Toolpath
+    report: dict[str, Any]
+    layer_stats: list[dict[str, Any]]
+    width_errors: dict[str, dict[str, NDArray[np.float64]]]
+    status: str
+    timings: dict[str, float]
+
+
+def _compact(vertices: NDArray[np.float64], faces: NDArray[np.int32]) -> tuple[
+    NDArray[np.integer], NDArray[np.int32]
+]:
+    used, inverse = np.unique(faces, return_inverse=True)
+    return used, inverse.reshape(-1, 3).astype(np.int32)
+
+
+def _mean_width(vertices: NDArray[np.float64], faces: NDArray[np.int32],
+                width: NDArray[np.float64]) -> float:
+    """Area-weighted mean of W over the surface (W-bar of eq. 14)."""
+    tri = vertices[faces]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    total = float(area.sum())
+    if total <= tol.zero:
+        return float(width.mean())
+    return float((area * width[faces].mean(axis=1)).sum() / total)
+
+
+class _Surface:
+    """What the line generators need of one (possibly deformed) component surface."""
+
+    def __init__(self, vertices: NDArray[np.float64], faces: NDArray[np.int32]) -> None:
+        from slicer.toolpath.geodesic import boundary_distance
+
+        self.vertices = vertices
+        self.faces = faces
+        self.distance = boundary_distance(vertices, faces)
+        self.max_distance = float(self.distance.max()) if len(self.distance) else 0.0
+        self._direction: NDArray[np.float64] | None = None
+
+    @property
+    def direction(self) -> NDArray[np.float64]:
+        """(m, 3) per-face stripe direction (computed on first use)."""
+        if self._direction is None:
+            from slicer.toolpath.surface import stripe_direction
+
+            self._direction = stripe_direction(self.vertices, self.faces, self.distance)
+        return self._direction
+
+    def centre_lines(self) -> SurfaceLines:
+        """One line along the middle of a band with holes: u = 1/2 of the harmonic u that
+        is 0 on the longest boundary loop and 1 on the others (empty with a single loop)."""
+        from scipy.sparse.linalg import spsolve
+
+        from slicer.toolpath.isolines import iso_lines
+        from slicer.toolpath.lines import empty_lines
+        from slicer.toolpath.surface import boundary_loops, cotan_laplacian
+
+        loops = boundary_loops(self.faces)
+        if len(loops) < 2:
+            return empty_lines()
+        length = [float(np.linalg.norm(self.vertices[lp] - self.vertices[np.roll(lp, 1)],
+                                       axis=1).sum()) for lp in loops]
+        outer = int(np.argmax(length))
+        n = len(self.vertices)
+        fixed = np.zeros(n, dtype=bool)
+        u = np.zeros(n)
+        for i, lp in enumerate(loops):
+            fixed[lp] = True
+            u[lp] = 0.0 if i == outer else 1.0
+        lap = cotan_laplacian(self.vertices, self.faces, robust=True).tocsr()
+        free = np.flatnonzero(~fixed)
+        if free.size:
+            rhs = -lap[free][:, np.flatnonzero(fixed)] @ u[fixed]
+            u[free] = spsolve(lap[free][:, free].tocsc(), rhs)
+        return iso_lines(self.vertices, self.faces, u, np.array([0.5]))
+
+    def lines(self, pattern: int, spacing: float, poisson: bool = False) -> SurfaceLines:
+        """Contours or stripes at ``spacing`` on this surface (its units).
+
+        Contours start half a spacing inside the boundary, or half the largest boundary
+        distance where the component is narrower than one spacing (a thin band then still
+        gets a loop along its middle).
+        """
+        if pattern == PATTERN_CONTOUR:
+            from slicer.toolpath.contours import contour_lines
+
+            offset = min(0.5 * spacing, 0.5 * self.max_distance)
+            return contour_lines(self.vertices, self.faces, self.distance, spacing, offset)
+        from slicer.toolpath.stripes import poisson_stripe_lines, stripe_lines
+
+        fn = poisson_stripe_lines if poisson else stripe_lines
+        return fn(self.vertices, self.faces, self.direction, spacing)
+
+
+def _measure(lines: SurfaceLines, width_pt: NDArray[np.float64],
+             normals_pt: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(k,) float64, |spacing - W| / W at the line points with a measured spacing."""
+    from slicer.toolpath.width_error import line_spacing
+
+    if len(lines.points) < 2:
+        return np.zeros(0)
+    spacing = line_spacing(lines.points, lines.line, normals_pt, closed=lines.closed)
+    ok = np.isfinite(spacing) & (width_pt > 0)
+    return np.abs(spacing[ok] - width_pt[ok]) / width_pt[ok]
+
+
+@dataclass(frozen=True, eq=False)
+class _Built:
+    lines: SurfaceLines
+    linked: LinkedPath
+    waypoints: Waypoints
+
+
+class _Component:
+    """One layer component on its own vertex numbering, with its process fields."""
+
+    def __init__(self, layer: LayerMesh, face_ids: NDArray[np.int64], pattern: int,
+                 cfg: ToolpathConfig, profile: ExtrusionProfile) -> None:
+        used, faces = _compact(layer.vertices, layer.faces[face_ids])
+        self.vertices = layer.vertices[used]
+        self.faces = faces
+        # H as sliced (for the required volume) and H as printed: clamped to the profile's
+        # table, because W = C / (H v) diverges as H -> 0 where the speed saturates
+        self.height_sliced = np.maximum(layer.height[used], 0.0)
+        self.height = np.clip(self.height_sliced, *profile.layer_height_range)
+        self.direction = layer.direction[used]
+        self.pattern = pattern
+        self.cfg = cfg
+        self.profile = profile
+        self.width = profile.width(self.height)
+        self.w_mean = _mean_width(self.vertices, faces, self.width)
+        self.normals = face_normals(self.vertices, faces, self.direction)
+        self.graph = mesh_graph(self.vertices, faces)
+        self.neighbours = face_neighbours(faces)
+
+    def values_at(self, face: NDArray[np.int32], bary: NDArray[np.float64]) -> tuple[
+        NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]
+    ]:
+        """(H, v, W) at surface points: H interpolated, v = f(H / beta), W = C / (H v)."""
+        h = np.clip(interpolate(self.height, self.faces, face, bary),
+                    *self.profile.layer_height_range)
+        v = self.profile.speed_at(h)
+        return h, v, self.profile.rate_mm3_s / (h * v)
+
+    def build(self, lines_found: SurfaceLines, level_of: NDArray[np.float64] | None,
+              spacing: float, start: NDArray[np.float64], lifter: Lifter, lift: float,
+              trim_distance: NDArray[np.float64] | None = None, link: bool = True) -> _Built:
+        """Map back, drop short fragments, resample, order, link; values per waypoint.
+
+        Args:
+            lines_found: lines on the (deformed) surface.
+            level_of: (n,) per-vertex boundary distance ordering contours, None for stripes.
+            spacing: line spacing on the surface the lines were found on (its units).
+            start: (3,) nozzle position before the component.
+            lifter, lift: travel clearance.
+            trim_distance: (n,) boundary distance on the lines' surface: open line ends
+                closer than spacing / 4 to the boundary are cut back by W / 2.
+            link: False stops after resampling (lines only: for width measurements).
+        """
+        lines = map_back(lines_found, self.vertices, self.faces)
+        lines = drop_short_lines(lines, self.cfg.min_path_length_mm)
+        _, _, w_pt = self.values_at(lines.face, lines.bary)
+        trim = None
+        if trim_distance is not None and lines.n_lines:
+            # An open line ending on the boundary stops half a width inside it: its band of
+            # material then ends at the boundary, and the U-turn connector to the next line
+            # runs along the boundary inside the layer (not half outside it).
+            idx = line_index(lines)
+            ends = np.stack([idx.start, np.maximum(idx.stop - 1, idx.start)], axis=1)
+            d_end = interpolate(trim_distance, self.faces, lines.face[ends.ravel()],
+                                lines.bary[ends.ravel()]).reshape(-1, 2)
+            # (at most a quarter of the line per end: a short stripe across a narrow band
+            # keeps half its length rather than vanishing)
+            cap = 0.25 * line_lengths(lines)[:, None]
+            trim = np.where(d_end < 0.25 * spacing, np.minimum(0.5 * w_pt[ends], cap), 0.0)
+        lines = resample_lines(lines, self.vertices, self.faces, self.cfg.waypoint_spacing * w_pt,
+                               neighbours=self.neighbours, trim=trim)
+        lines = drop_short_lines(lines, self.cfg.min_path_length_mm)
+        if not link:
+            empty = link_pieces(lines, [], self.vertices, self.faces, self.graph,
+                                np.zeros(0), lifter, lift)
+            return _Built(lines, empty, self._waypoints(empty))
+        _, _, w_rs = self.values_at(lines.face, lines.bary)
+        level = None
+        if level_of is not None:
+            level = line_levels(lines, interpolate(level_of, self.faces, lines.face, lines.bary))
+        pieces = order_lines(lines, start, level, spacing, EXTRUDE_FACTOR * w_rs)
+        linked = link_pieces(lines, pieces, self.vertices, self.faces, self.graph, w_rs,
+                             lifter, lift)
+        return _Built(lines, linked, self._waypoints(linked))
+
+    def _waypoints(self, linked: LinkedPath) -> Waypoints:
+        n = len(linked.points)
+        h, v, w = np.zeros(n), np.zeros(n), np.zeros(n)
+        normal = linked.normal.copy()
+        on = linked.face >= 0
+        h[on], v[on], w[on] = self.values_at(linked.face[on], linked.bary[on])
+        normal[on] = self.normals[linked.face[on]]
+        if np.any(~on) and np.any(on):
+            # travel points copy the process values of the previous surface point
+            src = np.maximum.accumulate(np.where(on, np.arange(n), -1))
+            first_on = int(np.argmax(on))
+            src = np.where(src < 0, first_on, src)
+            h, v, w = h[src], v[src], w[src]
+        return Waypoints(linked.points, normal, h, w, v, linked.extrude, linked.path,
+                         np.full(n, self.pattern, np.int8))
+
+
+def _component_toolpath(
+    layer: LayerMesh, face_ids: NDArray[np.int64], pattern: int, cfg: ToolpathConfig,
+    profile: ExtrusionProfile, start: NDArray[np.float64], lifter: Lifter, lift: float,
+    measure_baselines: bool,
+) -> ComponentResult:
+    """Toolpath of one component; a failure becomes an empty result carrying its reason."""
+    try:
+        return _component_toolpath_unsafe(layer, face_ids, pattern, cfg, profile, start,
+                                          lifter, lift, measure_baselines)
+    except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
+        faces = layer.faces[face_ids]
+        required = required_volume(layer.vertices, faces, np.maximum(layer.height, 0.0))
+        return ComponentResult(
+            waypoints=Waypoints.concat([]), pattern=pattern, n_faces=len(faces),
+            required_mm3=required, deposited_mm3=0.0, tau=float("nan"),
+            volume_status="failed", volume_trace=(), deform_status="failed",
+            extrusion_starts=0, width_error=np.zeros(0), width_error_undeformed=np.zeros(0),
+            width_error_poisson=np.zeros(0), error=f"{type(exc).__name__}: {exc}",
+        )
+
+
+def _component_toolpath_unsafe(
+    layer: LayerMesh, face_ids: NDArray[np.int64], pattern: int, cfg: ToolpathConfig,
+    profile: ExtrusionProfile, start: NDArray[np.float64], lifter: Lifter, lift: float,
+    measure_baselines: bool,
+) -> ComponentResult:
+    """Toolpath of one connected layer component (see the module docstring)."""
+    from slicer.toolpath.deform import deform_to_constant_width
+
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    comp = _Component(layer, face_ids, pattern, cfg, profile)
+    spread = float((comp.width.max() - comp.width.min()) / max(comp.w_mean, tol.zero))
+    deform_status = "skipped"
+    deformed = comp.vertices
+    if spread > DEFORM_SPREAD and cfg.deformation_iterations > 0:
+        res = deform_to_constant_width(comp.vertices, comp.faces, comp.width,
+                                       cfg.deformation_iterations)
+        deform_status = str(res.status)
+        if np.all(np.isfinite(res.vertices)):
+            deformed = np.asarray(res.vertices, dtype=np.float64)
+        else:
+            deform_status += ":not-finite(undeformed used)"
+    timings["deform"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    surf = _Surface(deformed, comp.faces)
+    timings["distance"] = time.perf_counter() - t0
+
+    t0 = time.perf_counter()
+    required = required_volume(comp.vertices, comp.faces, comp.height_sliced)
+
+    def run(surface: _Surface, used: int, tau: float | None = None, poisson: bool = False
+            ) -> VolumeMatch[_Built]:
+        """Lines of pattern ``used`` on ``surface``, volume-matched; with a fixed ``tau``
+        only the lines (no linking: for the baseline width measurements)."""
+        level_of = surface.distance if used == PATTERN_CONTOUR else None
+        trim_of = surface.distance if used == PATTERN_STRIPE else None
+
+        def evaluate(t: float) -> tuple[float, _Built]:
+            spacing = t * comp.w_mean
+            built = comp.build(surface.lines(used, spacing, poisson), level_of, spacing, start,
+                               lifter, lift, trim_of, link=tau is None)
+            return float(built.waypoints.deposited().sum()), built
+
+        if tau is not None:
+            return match_volume(evaluate, required, cfg.volume_tolerance, tau, 1)
+        return match_volume(evaluate, required, cfg.volume_tolerance)
+
+    def centre_match(lines: SurfaceLines) -> VolumeMatch[_Built]:
+        def fixed_lines(t: float) -> tuple[float, _Built]:
+            built = comp.build(lines, None, comp.w_mean, start, lifter, lift)
+            return float(built.waypoints.deposited().sum()), built
+
+        return match_volume(fixed_lines, required, cfg.volume_tolerance, 1.0, 1)
+
+    used = pattern
+    fallback = ""
+    centre = surf.centre_lines() if surf.max_distance < THIN_BAND * comp.w_mean else None
+    if centre is not None and centre.n_lines:
+        # A band with holes at most about one width wide holds one line: along its middle.
+        match, used, fallback = centre_match(centre), PATTERN_CONTOUR, "centre-line"
+    else:
+        match = run(surf, used)
+    if abs(match.rel_error) > THIN_SHORTFALL and not fallback:
+        # A band about one width wide: stripes across it vanish once their ends are cut
+        # back by W / 2, contours come out as a doubled loop. Try the other pattern and a
+        # single line along the middle (bands with holes); keep the closest volume.
+        options = [(match, used, "")]
+        if used == PATTERN_STRIPE:
+            options.append((run(surf, PATTERN_CONTOUR), PATTERN_CONTOUR, "contour"))
+        centre = surf.centre_lines() if centre is None else centre
+        if centre.n_lines:
+            options.append((centre_match(centre), PATTERN_CONTOUR, "centre-line"))
+        match, used, fallback = min(options, key=lambda o: abs(o[0].rel_error))
+    timings["lines"] = time.perf_counter() - t0
+    built = match.result
+
+    t0 = time.perf_counter()
+    err = _measure(built.lines, comp.values_at(built.lines.face, built.lines.bary)[2],
+                   comp.normals[built.lines.face])
+    err_undeformed = np.zeros(0)
+    err_poisson = np.zeros(0)
+    if measure_baselines:
+        if deformed is comp.vertices or fallback == "centre-line":
+            b = built  # no deformation (or one line): the direct lines are the lines
+        else:
+            b = run(_Surface(comp.vertices, comp.faces), used, match.tau).result
+        err_undeformed = _measure(b.lines, comp.values_at(b.lines.face, b.lines.bary)[2],
+                                  comp.normals[b.lines.face])
+        if used == PATTERN_STRIPE:
+            pb = run(surf, used, match.tau, poisson=True).result
+            err_poisson = _measure(pb.lines, comp.values_at(pb.lines.face, pb.lines.bary)[2],
+                                   comp.normals[pb.lines.face])
+    timings["baselines"] = time.perf_counter() - t0
+    wp = replace(built.waypoints, pattern=np.full(len(built.waypoints.path), used, np.int8))
+    return ComponentResult(
+        waypoints=wp,
+        pattern=used,
+        n_faces=len(comp.faces),
+        required_mm3=float(required),
+        deposited_mm3=float(wp.deposited().sum()),
+        tau=float(match.tau),
+        volume_status=match.status,
+        volume_trace=tuple((t.tau, t.volume, t.rel_error) for t in match.trace),
+        deform_status=deform_status,
+        extrusion_starts=built.linked.extrusion_starts,
+        width_error=err,
+        width_error_undeformed=err_undeformed,
+        width_error_poisson=err_poisson,
+        timings=timings,
+        fallback=fallback,
+    )
+
+
+def layer_toolpath(layer: LayerMesh, pattern: int, cfg: ToolpathConfig,
+                   profile: ExtrusionProfile, measure_baselines: bool = True) -> LayerResult:
+    """All components of one layer in nearest-neighbour order, joined by travel moves."""
+    from slicer.toolpath.surface import components
+
+    lift = LIFT_FACTOR * float(layer.height.max()) if len(layer.height) else 0.0
+    normals = layer.direction / np.maximum(
+        np.linalg.norm(layer.direction, axis=1, keepdims=True), tol.zero
+    )
+    lifter = Lifter(layer.vertices, normals)
+    comps = [np.asarray(c) for c in components(layer.faces)]
+    # Deterministic layer start: the corner of the layer's bounding box.
+    pos = layer.vertices.min(axis=0) if len(layer.vertices) else np.zeros(3)
+    results: list[ComponentResult] = []
+    parts: list[Waypoints] = []
+    todo = list(range(len(comps)))
+    while todo:
+        dist = [float(np.min(np.linalg.norm(
+            layer.vertices[np.unique(layer.faces[comps[i]])] - pos, axis=1))) for i in todo]
+        ci = todo.pop(int(np.argmin(dist)))
+        res = _component_toolpath(layer, comps[ci], pattern, cfg, profile, pos, lifter, lift,
+                                  measure_baselines)
+        wp = res.waypoints
+        if len(wp.position) == 0:
+            results.append(res)
+            continue
+        if parts:
+            prev = parts[-1]
+            tp, tn = lifter.travel(prev.position[-1], wp.position[0], lift,
+                                   2.0 * float(prev.width[-1]))
+            parts.append(_travel(tp, tn, prev, -1))
+        parts.append(wp)
+        results.append(res)
+        pos = wp.position[-1]
+    out_of_range = int(np.count_nonzero(~profile.in_range(layer.height)))
+    return LayerResult(
+        index=layer.index,
+        pattern=pattern,
+        waypoints=Waypoints.concat(parts),
+        components=results,
+        surface_vertices=layer.vertices,
+        surface_normals=normals,
+        lift=lift,
+        height_out_of_profile=out_of_range,
+        n_vertices=len(layer.vertices),
+    )
+
+
+def _travel(points: NDArray[np.float64], normals: NDArray[np.float64], like: Waypoints,
+            at: int) -> Waypoints:
+    """Travel waypoints (extrude=False, one path) with the process values of ``like[at]``."""
+    k = len(points)
+    return Waypoints(
+        position=points,
+        normal=normals,
+        height=np.full(k, like.height[at]),
+        width=np.full(k, like.width[at]),
+        speed=np.full(k, like.speed[at]),
+        extrude=np.zeros(k, dtype=bool),
+        path=np.zeros(k, dtype=np.int32),
+        pattern=np.full(k, like.pattern[at], np.int8),
+    )
+
+
+def split_layers(layers: Layers) -> list[LayerMesh]:
+    """All layers as LayerMesh, grouping faces by layer once (not one scan per layer)."""
+    order = np.argsort(layers.face_layer, kind="stable")
+    fl = layers.face_layer[order]
+    out = []
+    for i in range(layers.layer_count):
+        lo, hi = np.searchsorted(fl, [i, i + 1])
+        faces = layers.faces[order[lo:hi]]
+        used, inverse = np.unique(faces, return_inverse=True)
+        out.append(LayerMesh(
+            index=i,
+            vertices=layers.vertices[used],
+            faces=inverse.reshape(-1, 3).astype(np.int32),
+            height=layers.vertex_height[used],
+            direction=layers.vertex_direction[used],
+        ))
+    return out
+
+
+def _run_chunk(args: tuple[list[LayerMesh], str, ToolpathConfig, ExtrusionProfile, bool]
+               ) -> list[LayerResult]:
+    meshes, first, cfg, profile, baselines = args
+    return [layer_toolpath(m, layer_pattern(m.index, first), cfg, profile, baselines)
+            for m in meshes if len(m.faces)]
+
+
+def compute_toolpath(
+    layers: Layers,
+    config: JobConfig,
+    profile: ExtrusionProfile,
+    progress: Progress | None = None,
+    measure_baselines: bool = True,
+    workers: int = 2,
+) -> ToolpathResult:
+    """Toolpath of all layers (module docstring) with its report section.
+
+    Args:
+        layers: the curved layers.
+        config: the job config (``toolpath`` section used).
+        profile: the extrusion profile.
+        progress: receives ``update(fraction, detail)`` per finished chunk of layers.
+        measure_baselines: also compute the width error without deformation and of the
+            Poisson alternative on stripe layers (about triples the work).
+        workers: processes; 1 (or few layers) runs in the calling process.
+    """
+    t_start = time.perf_counter()
+    cfg = config.toolpath
+    meshes = [m for m in split_layers(layers) if len(m.faces)]
+    results: list[LayerResult] = []
+    def report_progress(fraction: float, detail: str) -> None:
+        if progress is not None:
+            progress.update(fraction, detail)
+
+    if workers <= 1 or len(meshes) < SERIAL_BELOW or multiprocessing.current_process().daemon:
+        # (a daemonic process, e.g. a pipeline node, may not start worker processes)
+        for i, m in enumerate(meshes):
+            results.extend(_run_chunk(([m], cfg.first_pattern, cfg, profile, measure_baselines)))
+            report_progress((i + 1) / len(meshes), f"layer {m.index}")
+    else:
+        n_chunks = min(len(meshes), 4 * workers)
+        chunks = [meshes[i::n_chunks] for i in range(n_chunks)]  # interleaved: balanced sizes
+        done = 0
+        # fork is cheap, but forking a process that runs other threads (a bus client) can
+        # deadlock in the child: spawn then
+        method = "fork" if threading.active_count() == 1 else "spawn"
+        ctx = multiprocessing.get_context(method)
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
+            futures = [pool.submit(_run_chunk, (c, cfg.first_pattern, cfg, profile,
+                                                measure_baselines)) for c in chunks]
+            for fut in as_completed(futures):
+                part = fut.result()
+                results.extend(part)
+                done += len(part)
+                report_progress(done / len(meshes), f"{done}/{len(meshes)} layers")
+    results.sort(key=lambda r: r.index)
+    toolpath, stats = assemble(results)
+    report, errors, status, timings = _report(results, toolpath, profile)
+    timings["total"] = time.perf_counter() - t_start
+    report["timing_s"] = {k: round(v, 3) for k, v in timings.items()}
+    report["per_layer"] = stats
+    return ToolpathResult(toolpath, report, stats, errors, status, timings)
+
+
+def assemble(results: list[LayerResult]) -> tuple[Toolpath, list[dict[str, Any]]]:
+    """Concatenate layers in order with travel moves lifted above the layer just printed."""
+    parts: list[Waypoints] = []
+    layer_of: list[NDArray[np.int32]] = []
+    stats: list[dict[str, Any]] = []
+    prev: LayerResult | None = None
+    for r in results:
+        wp = r.waypoints
+        if len(wp.position) == 0:
+            continue
+        if prev is not None:
+            last = parts[-1]
+            lifter = Lifter(prev.surface_vertices, prev.surface_normals)
+            tp, tn = lifter.travel(last.position[-1], wp.position[0], prev.lift,
+                                   2.0 * float(last.width[-1]))
+            trav = _travel(tp, tn, last, -1)
+            parts.append(trav)
+            # the move finishes the layer just printed: it belongs to that layer
+            layer_of.append(np.full(len(tp), prev.index, np.int32))
+        parts.append(wp)
+        layer_of.append(np.full(len(wp.position), r.index, np.int32))
+        stats.append({
+            "layer": r.index,
+            "pattern": PATTERN_NAMES[r.pattern],
+            "components": len(r.components),
+            "waypoints": len(wp.position),
+            "required_mm3": float(sum(c.required_mm3 for c in r.components)),
+            "deposited_mm3": float(sum(c.deposited_mm3 for c in r.components)),
+            "tau": [c.tau for c in r.components],
+            "volume_status": [c.volume_status for c in r.components],
+            "deform_status": [c.deform_status for c in r.components],
+            "extrusion_starts": [c.extrusion_starts for c in r.components],
+            "fallback": [c.fallback for c in r.components],
+            "height_out_of_profile": r.height_out_of_profile,
+        })
+        prev = r
+    allw = Waypoints.concat(parts)
+    toolpath = Toolpath(
+        position=allw.position,
+        normal=allw.normal,
+        layer=np.concatenate(layer_of) if layer_of else np.zeros(0, np.int32),
+        path=allw.path,
+        height=allw.height,
+        width=allw.width,
+        speed=allw.speed,
+        extrude=allw.extrude,
+        pattern=allw.pattern,
+    )
+    return toolpath, stats
+
+
+def _pct(values: NDArray[np.float64]) -> dict[str, float | int]:
+    if values.size == 0:
+        return {"p50": float("nan"), "p90": float("nan"), "p95": float("nan"), "n": 0}
+    p50, p90, p95 = np.percentile(values, [50, 90, 95])
+    return {"p50": float(p50), "p90": float(p90), "p95": float(p95), "n": int(values.size)}
+
+
+def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile) -> tuple[
+    dict[str, Any], dict[str, dict[str, NDArray[np.float64]]], str, dict[str, float]
+]:
+    comps = [c for r in results for c in r.components]
+    errors: dict[str, dict[str, NDArray[np.float64]]] = {}
+    for code, name in PATTERN_NAMES.items():
+        sel = [c for c in comps if c.pattern == code]
+        errors[name] = {
+            "deformed": np.concatenate([c.width_error for c in sel]) if sel else np.zeros(0),
+            "undeformed": (np.concatenate([c.width_error_undeformed for c in sel])
+                           if sel else np.zeros(0)),
+            "poisson": (np.concatenate([c.width_error_poisson for c in sel])
+                        if sel else np.zeros(0)),
+        }
+    dep_mask = deposit_mask(tp.extrude, tp.path)
+    seg = np.linalg.norm(np.diff(tp.position, axis=0), axis=1) if len(tp) > 1 else np.zeros(0)
+    deposited = float(segment_volume(tp.position, tp.height, tp.width, dep_mask).sum())
+    required = float(sum(c.required_mm3 for c in comps))
+    ok_comps = [c for c in comps if not c.error]
+    taus = np.array([c.tau for c in ok_comps])
+    starts = [c.extrusion_starts for c in comps]
+    statuses: dict[str, int] = {}
+    for c in comps:
+        statuses[c.volume_status] = statuses.get(c.volume_status, 0) + 1
+    deform: dict[str, int] = {}
+    for c in comps:
+        key = c.deform_status.split(":")[0]
+        deform[key] = deform.get(key, 0) + 1
+    comp_err = np.array([c.deposited_mm3 / c.required_mm3 - 1 for c in ok_comps
+                         if c.required_mm3 > 0])
+    timings: dict[str, float] = {}
+    for c in comps:
+        for k, v in c.timings.items():
+            timings[k] = timings.get(k, 0.0) + v
+    n_vert = sum(r.n_vertices for r in results)
+    out_of_range = sum(r.height_out_of_profile for r in results)
+    report: dict[str, Any] = {
+        "waypoints": len(tp),
+        "paths": int(np.unique(tp.path[tp.extrude]).size),
+        "travel_moves": int(np.unique(tp.path[~tp.extrude]).size),
+        "length_mm": float(seg[dep_mask].sum()),
+        "travel_length_mm": float(seg[~dep_mask].sum()),
+        "deposited_volume_mm3": deposited,
+        "required_volume_mm3": required,
+        "layer_volume_error": deposited / required - 1.0 if required > 0 else float("nan"),
+        "volume_error": None,  # deposited / model volume - 1: filled by the pipeline
+        "width_error": {k: _pct(v["deformed"]) for k, v in errors.items()},
+        "width_error_undeformed": {k: _pct(v["undeformed"]) for k, v in errors.items()},
+        "width_error_poisson_stripe": _pct(errors["stripe"]["poisson"]),
+        "extrusion_starts": {
+            "total": int(sum(starts)),
+            "components": len(comps),
+            "mean_per_component": float(np.mean(starts)) if starts else 0.0,
+            "max_per_component": int(max(starts)) if starts else 0,
+        },
+        "tau": {"min": float(taus.min()) if taus.size else float("nan"),
+                "max": float(taus.max()) if taus.size else float("nan")},
+        "component_volume_error": {
+            "max_abs": float(np.abs(comp_err).max()) if comp_err.size else 0.0,
+            "p95_abs": float(np.percentile(np.abs(comp_err), 95)) if comp_err.size else 0.0,
+        },
+        "volume_match_status": statuses,
+        "thin_fallback": {kind: sum(c.fallback == kind for c in comps)
+                          for kind in ("contour", "centre-line")},
+        "deformation_status": deform,
+        "height_out_of_profile_fraction": out_of_range / n_vert if n_vert else 0.0,
+        "profile": {"name": profile.name, "rate_mm3_s": profile.rate_mm3_s,
+                    "beta": profile.beta, "calibrated": profile.calibrated},
+        "speed_mm_s": {"min": float(tp.speed.min()) if len(tp) else 0.0,
+                       "max": float(tp.speed.max()) if len(tp) else 0.0},
+    }
+    failed = [f"layer {r.index}: {c.error}" for r in results for c in r.components if c.error]
+    report["failed_components"] = {"count": len(failed), "reasons": failed[:20]}
+    status = "ok" if set(statuses) <= {"converged"} else "volume"
+    if failed:
+        status = "failed-components"
+    return report, errors, status, timings

@@ -1,0 +1,295 @@
+"""Link the ordered lines of a layer component into few continuous extrusion paths.
+
+Rule: the connector from the end of one line to the start of the next runs on the layer
+surface: the straight chord where it stays on the layer (within CHORD_TOLERANCE; always for
+points in edge-adjacent faces), else the shortest path on the mesh edge graph
+(``scipy.sparse.csgraph.dijkstra`` from the three corners of the start face). If it is
+shorter than ``EXTRUDE_FACTOR`` (2) times the local toolpath width it stays inside the band of
+material being laid (it crosses at most about one neighbouring line), so it extrudes and the
+two lines become one path. Otherwise the nozzle stops extruding and travels: it lifts along
+the printing direction to ``lift`` above the current layer (at least one layer height), moves
+across at that clearance (points pushed up wherever they would come closer to the layer than
+``lift``), and plunges onto the next line's start. Travel waypoints carry extrude=False and a
+path id of their own; a segment deposits iff both its ends extrude and share a path id.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.sparse import coo_matrix, csr_matrix
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from slicer.tolerance import tol
+from slicer.toolpath.lines import SurfaceLines
+from slicer.toolpath.ordering import Piece
+
+EXTRUDE_FACTOR = 2.0  # connectors shorter than this times W extrude
+LIFT_FACTOR = 1.5  # travel clearance above the layer, in layer heights (>= 1)
+CHORD_TOLERANCE = 0.02  # a chord within this x its limit of the layer counts as on it
+
+
+@dataclass(frozen=True, eq=False)
+class MeshGraph:
+    """Edge graph of a layer mesh for on-surface connectors.
+
+    Attributes:
+        graph: (n, n) csr float64, mm, symmetric edge lengths.
+        vertex_face: (n,) int32, one face containing each vertex.
+        vertex_corner: (n,) int64, the vertex's corner (0, 1, 2) in that face.
+    """
+
+    graph: csr_matrix
+    vertex_face: NDArray[np.int32]
+    vertex_corner: NDArray[np.int64]
+
+
+def mesh_graph(vertices: NDArray[np.float64], faces: NDArray[np.int32]) -> MeshGraph:
+    """Build the edge graph of ``faces`` over ``vertices`` ((n, 3) mm)."""
+    n = len(vertices)
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    w = np.maximum(np.linalg.norm(vertices[e[:, 0]] - vertices[e[:, 1]], axis=1), tol.merge)
+    g = coo_matrix(
+        (np.r_[w, w], (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)
+    ).tocsr()
+    vf = np.full(n, -1, dtype=np.int64)
+    vc = np.zeros(n, dtype=np.int64)
+    flat = faces.ravel()
+    order = np.arange(flat.size)[::-1]  # later writes win: any containing face will do
+    vf[flat[order]] = order // 3
+    vc[flat[order]] = order % 3
+    return MeshGraph(g, vf.astype(np.int32), vc)
+
+
+@dataclass(frozen=True, eq=False)
+class Connector:
+    """A path on the surface between two points.
+
+    Attributes:
+        points: (k, 3) float64, mm, interior points (mesh vertices), may be empty.
+        face: (k,) int32.
+        bary: (k, 3) float64.
+        length: float, mm, total length including both ends.
+    """
+
+    points: NDArray[np.float64]
+    face: NDArray[np.int32]
+    bary: NDArray[np.float64]
+    length: float
+
+
+def surface_connector(
+    mg: MeshGraph,
+    vertices: NDArray[np.float64],
+    faces: NDArray[np.int32],
+    pa: NDArray[np.float64],
+    fa: int,
+    pb: NDArray[np.float64],
+    fb: int,
+    limit: float,
+    lifter: Lifter | None = None,
+) -> Connector | None:
+    """Shortest on-surface connection from (pa in face fa) to (pb in face fb), or None.
+
+    The straight chord is used when it stays on the surface: the two faces share an edge, or
+    ``lifter`` finds the chord within ``CHORD_TOLERANCE`` of the layer (flat or gently
+    curved there). Otherwise the path runs pa -> a corner of fa -> mesh edges (Dijkstra from
+    the three corners) -> a corner of fb -> pb, the best of the 3 x 3 corner pairs. None if
+    longer than ``limit`` (mm).
+    """
+    empty = Connector(np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros((0, 3)), 0.0)
+    chord = float(np.linalg.norm(pb - pa))
+    if chord > limit:
+        return None
+    if fa == fb or np.intersect1d(faces[fa], faces[fb]).size >= 2:
+        return Connector(empty.points, empty.face, empty.bary, chord)
+    if lifter is not None:
+        t = np.linspace(0.0, 1.0, 9)[1:-1, None]
+        if lifter.max_offset((1.0 - t) * pa + t * pb) <= CHORD_TOLERANCE * max(limit, 1.0):
+            return Connector(empty.points, empty.face, empty.bary, chord)
+    ca, cb = faces[fa].astype(np.int64), faces[fb].astype(np.int64)
+    off_a = np.linalg.norm(vertices[ca] - pa, axis=1)
+    off_b = np.linalg.norm(vertices[cb] - pb, axis=1)
+    dist, pred = dijkstra(
+        mg.graph, indices=ca, limit=max(limit - off_a.min() - off_b.min(), 0.0),
+        return_predecessors=True,
+    )
+    total = off_a[:, None] + dist[:, cb] + off_b[None, :]  # (3, 3) source x target corner
+    i, j = np.unravel_index(int(np.argmin(total)), total.shape)
+    length = float(total[i, j])
+    if not np.isfinite(length) or length > limit:
+        return None
+    src, dst = int(ca[i]), int(cb[j])
+    nodes = [dst]
+    while nodes[-1] != src:
+        nodes.append(int(pred[i, nodes[-1]]))
+    path = np.array(nodes[::-1])
+    bary = np.zeros((len(path), 3))
+    bary[np.arange(len(path)), mg.vertex_corner[path]] = 1.0
+    return Connector(vertices[path], mg.vertex_face[path], bary, length)
+
+
+class Lifter:
+    """Pushes travel points to a clearance above a layer along its growth direction.
+
+    Args:
+        vertices: (n, 3) float64, mm, layer vertices.
+        normals: (n, 3) float64, unit growth direction per vertex.
+    """
+
+    def __init__(self, vertices: NDArray[np.float64], normals: NDArray[np.float64]) -> None:
+        self.vertices = vertices
+        self.normals = normals
+        self.tree = cKDTree(vertices)
+
+    def clear(self, points: NDArray[np.float64], lift: float, rounds: int = 4) -> tuple[
+        NDArray[np.float64], NDArray[np.float64]
+    ]:
+        """Points moved up along the nearest vertex's normal until ``lift`` above the layer.
+
+        Returns (points (k, 3) mm, normals (k, 3) unit of the nearest layer vertex).
+        """
+        p = np.array(points, dtype=np.float64, copy=True)
+        nrm = np.zeros_like(p)
+        for _ in range(rounds):
+            _, nearest = self.tree.query(p)
+            nrm = self.normals[nearest]
+            h = np.einsum("ij,ij->i", p - self.vertices[nearest], nrm)
+            short = h < lift * (1.0 - 1e-9)
+            if not np.any(short):
+                break
+            p[short] += (lift - h[short])[:, None] * nrm[short]
+        return p, nrm
+
+    def max_offset(self, points: NDArray[np.float64]) -> float:
+        """Largest distance (mm) of ``points`` from the layer's tangent planes at the nearest
+        vertices (0 for points on a flat layer)."""
+        _, nearest = self.tree.query(points)
+        h = np.einsum("ij,ij->i", points - self.vertices[nearest], self.normals[nearest])
+        return float(np.abs(h).max()) if len(h) else 0.0
+
+    def travel(
+        self, pa: NDArray[np.float64], pb: NDArray[np.float64], lift: float, step: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Travel waypoints from above ``pa`` to above ``pb`` (both on the layer).
+
+        Returns (points (k, 3) mm, normals (k, 3) unit): the lift point, the traverse at
+        ``lift`` clearance sampled every ``step`` mm, the plunge point; all extrude=False.
+        """
+        d = float(np.linalg.norm(pb - pa))
+        k = max(int(np.ceil(d / max(step, tol.merge))), 1)
+        t = np.linspace(0.0, 1.0, k + 1)[:, None]
+        line = (1.0 - t) * pa + t * pb
+        return self.clear(line, lift)
+
+
+@dataclass(frozen=True, eq=False)
+class LinkedPath:
+    """A component's waypoints in print order.
+
+    Attributes:
+        points: (N, 3) float64, mm.
+        face: (N,) int32, face on the layer, -1 for travel points off the surface.
+        bary: (N, 3) float64, barycentrics in ``face`` (zeros for travel points).
+        normal: (N, 3) float64, unit; zeros for surface points (filled from faces later).
+        extrude: (N,) bool.
+        path: (N,) int32, local path id, increasing in print order (travel gets its own id).
+    """
+
+    points: NDArray[np.float64]
+    face: NDArray[np.int32]
+    bary: NDArray[np.float64]
+    normal: NDArray[np.float64]
+    extrude: NDArray[np.bool_]
+    path: NDArray[np.int32]
+
+    @property
+    def extrusion_starts(self) -> int:
+        """Number of continuous extrusion paths."""
+        ids = np.unique(self.path[self.extrude])
+        return int(ids.size)
+
+
+def deposit_mask(extrude: NDArray[np.bool_], path: NDArray[np.integer]) -> NDArray[np.bool_]:
+    """(N - 1,) bool: segment i -> i + 1 deposits (both ends extrude, same path id)."""
+    return extrude[1:] & extrude[:-1] & (path[1:] == path[:-1])
+
+
+def link_pieces(
+    lines: SurfaceLines,
+    pieces: list[Piece],
+    vertices: NDArray[np.float64],
+    faces: NDArray[np.int32],
+    mg: MeshGraph,
+    width: NDArray[np.float64],
+    lifter: Lifter,
+    lift: float,
+) -> LinkedPath:
+    """Join ``pieces`` (on ``vertices``/``faces``) into paths; see the module rule.
+
+    Args:
+        lines: the component's (resampled) lines.
+        pieces: print order from ``ordering.order_lines``.
+        vertices: (n, 3) float64, mm, layer component vertices.
+        faces: (m, 3) int32.
+        mg: its edge graph.
+        width: (P,) float64, mm, toolpath width at each line point.
+        lifter: travel clearance helper for this layer.
+        lift: mm, travel clearance above the layer.
+    """
+    pts: list[NDArray[np.float64]] = []
+    fcs: list[NDArray[np.int32]] = []
+    brs: list[NDArray[np.float64]] = []
+    nrm: list[NDArray[np.float64]] = []
+    ext: list[NDArray[np.bool_]] = []
+    pid: list[NDArray[np.int32]] = []
+    current = -1
+
+    def add(p: NDArray[np.float64], f: NDArray[np.int32], b: NDArray[np.float64],
+            n: NDArray[np.float64], e: bool, path: int) -> None:
+        pts.append(p)
+        fcs.append(f)
+        brs.append(b)
+        nrm.append(n)
+        ext.append(np.full(len(p), e))
+        pid.append(np.full(len(p), path, dtype=np.int32))
+
+    prev_end: int | None = None
+    for piece in pieces:
+        idx = piece.points
+        first = int(idx[0])
+        joined = False
+        if prev_end is not None:
+            w = 0.5 * (width[prev_end] + width[first])
+            conn = surface_connector(
+                mg, vertices, faces, lines.points[prev_end], int(lines.face[prev_end]),
+                lines.points[first], int(lines.face[first]), EXTRUDE_FACTOR * w, lifter,
+            )
+            if conn is not None:
+                add(conn.points, conn.face, conn.bary, np.zeros_like(conn.points), True, current)
+                joined = True
+            else:
+                current += 1
+                tp, tn = lifter.travel(lines.points[prev_end], lines.points[first], lift,
+                                       2.0 * w)
+                add(tp, np.full(len(tp), -1, np.int32), np.zeros_like(tp), tn, False, current)
+        if not joined:
+            current += 1
+        add(lines.points[idx], lines.face[idx].astype(np.int32), lines.bary[idx],
+            np.zeros((len(idx), 3)), True, current)
+        prev_end = int(idx[-1])
+    if not pts:
+        return LinkedPath(np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros((0, 3)),
+                          np.zeros((0, 3)), np.zeros(0, bool), np.zeros(0, np.int32))
+    return LinkedPath(
+        points=np.concatenate(pts),
+        face=np.concatenate(fcs).astype(np.int32),
+        bary=np.concatenate(brs),
+        normal=np.concatenate(nrm),
+        extrude=np.concatenate(ext),
+        path=np.concatenate(pid).astype(np.int32),
+    )

@@ -1,0 +1,86 @@
+"""Synthetic job artifacts for the runtime tests: a tiny toolpath and a matching trajectory.
+
+``slice_job``/``plan_job`` have the signatures of ``mesp_cell.nodes.adapters`` so a launch can
+name them (``slice_fn``/``plan_fn``) and run the whole cell without the real pipeline.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from slicer.artifacts import save_npz
+from slicer.stages import Toolpath
+
+HOME = np.radians([0.0, -100.0, 100.0, -90.0, -90.0, 0.0])
+LAYERS = 3
+PER_LAYER = 12  # waypoints per layer
+STEP = 4        # trajectory samples per waypoint
+RATE_HZ = 100.0  # trajectory sample rate
+TRAVEL = 12     # non-depositing samples between layers
+
+
+def toolpath() -> Toolpath:
+    """LAYERS square-ish contours of PER_LAYER waypoints, 0.6 mm apart in z."""
+    n = LAYERS * PER_LAYER
+    layer = np.repeat(np.arange(LAYERS), PER_LAYER).astype(np.int32)
+    ang = np.tile(np.linspace(0.0, 2 * np.pi, PER_LAYER, endpoint=False), LAYERS)
+    pos = np.stack([10 * np.cos(ang), 10 * np.sin(ang), 0.6 * layer], axis=1)
+    normal = np.tile([0.0, 0.0, 1.0], (n, 1))
+    return Toolpath(position=pos, normal=normal, layer=layer, path=layer.copy(),
+                    height=np.full(n, 0.6), width=np.full(n, 1.2), speed=np.full(n, 9.0),
+                    extrude=np.ones(n, bool), pattern=np.zeros(n, np.int8))
+
+
+def trajectory_arrays(n_waypoints: int, q_offset: float = 0.0) -> dict[str, np.ndarray]:
+    """A smooth joint motion around HOME that passes every waypoint in order.
+
+    Layer l's waypoints follow each other every STEP samples; TRAVEL samples without
+    deposition separate layers. ``q_offset`` (rad) shifts joint 1 (tests of bad trajectories).
+    """
+    rows_wp, rows_ex = [], []
+    for l in range(LAYERS):
+        for i in range(PER_LAYER):
+            rows_wp += [l * PER_LAYER + i] + [-1] * (STEP - 1)
+            rows_ex += [True] * STEP
+        if l < LAYERS - 1:
+            rows_wp += [-1] * TRAVEL
+            rows_ex += [False] * TRAVEL
+    rows_wp += [-1]
+    rows_ex += [False]
+    wp = np.asarray(rows_wp, dtype=np.int32)
+    M = wp.shape[0]
+    t = np.arange(M) / RATE_HZ
+    s = np.sin(2 * np.pi * t / t[-1])[:, None]
+    q = HOME + 0.15 * s * np.array([1.0, 0.5, -0.5, 0.3, 0.2, 0.1])
+    q[:, 0] += q_offset
+    qd = np.gradient(q, t, axis=0)
+    assert int(wp.max()) + 1 == n_waypoints
+    return {"t": t, "q": q, "qd": qd, "tcp": np.zeros((M, 3)), "waypoint": wp,
+            "alpha": np.full(M, 90.0), "extrude": np.asarray(rows_ex, bool),
+            "base_T": np.eye(4), "tool_T": np.eye(4), "model_T": np.eye(4)}
+
+
+def slice_job(model: Path, job_file: Path | None, out_dir: Path) -> dict[str, Any]:
+    """Stands in for the slicing pipeline: refuses a missing model, writes toolpath.npz."""
+    from slicer.errors import InputError
+
+    if not Path(model).is_file():
+        raise InputError(f"model {model} does not exist", "check the path")
+    toolpath().save(Path(out_dir))
+    return {}
+
+
+def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
+    """Stands in for the planner: writes a trajectory through every waypoint.
+
+    With a cell file, the real planner runs instead (the placement-refusal tests need it).
+    """
+    if cell_file is not None:
+        from mesp_cell.nodes import adapters
+
+        return adapters.plan_job(job_dir, cell_file)
+    save_npz(Path(job_dir) / "trajectory.npz", trajectory_arrays(LAYERS * PER_LAYER))
+    return {}

@@ -1,0 +1,100 @@
+"""The bus: typed pub/sub, commands with replies, presence, refusal when nobody answers."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections.abc import Iterator
+
+import pytest
+
+from mesp_cell.bus.session import Bus, BusConfig
+from mesp_cell.drivers.extruder_emulator import free_port
+from mesp_cell.messages import Command, EStop, Heartbeat, Reply
+from slicer.errors import InputError
+
+
+@pytest.fixture
+def pair() -> Iterator[tuple[Bus, Bus]]:
+    hub = f"tcp/127.0.0.1:{free_port()}"
+    a = Bus(BusConfig(cell="t", listen=(hub,)), "alpha")
+    b = Bus(BusConfig(cell="t", connect=(hub,)), "beta")
+    time.sleep(0.3)
+    yield a, b
+    b.close()
+    a.close()
+
+
+def wait(event: threading.Event) -> bool:
+    return event.wait(5.0)
+
+
+def test_publish_subscribe_typed(pair: tuple[Bus, Bus]) -> None:
+    a, b = pair
+    got: list[Heartbeat] = []
+    done = threading.Event()
+
+    def on(msg: Heartbeat) -> None:
+        got.append(msg)
+        if len(got) == 3:
+            done.set()
+
+    b.subscribe("alpha", "heartbeat", Heartbeat, on)
+    time.sleep(0.2)
+    a.publish("heartbeat", EStop("x", "wrong type on this topic", 0.0))
+    for i in range(3):
+        a.publish("heartbeat", Heartbeat("alpha", "active", i, 1, float(i)))
+    assert wait(done)
+    assert [m.seq for m in got] == [0, 1, 2]
+    assert b.dropped == 1
+
+
+def test_request_reply_and_refusals(pair: tuple[Bus, Bus],
+                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    a, b = pair
+    # pytest's log capture is slow to take a traceback from zenoh's callback thread.
+    monkeypatch.setattr(logging.getLogger("mesp.bus"), "disabled", True)
+
+    def handler(cmd: Command) -> Reply:
+        if cmd.verb == "bad":
+            raise InputError("bad input", "fix it")
+        if cmd.verb == "bug":
+            raise RuntimeError("boom")
+        return Reply.done(echo=cmd.arg("x"))
+
+    a.serve(handler)
+    time.sleep(0.2)
+    assert b.request("alpha", Command.make("ok", x=3)).value("echo") == 3
+    assert b.request("alpha", Command.make("bad")).reason == "bad input; fix it"
+    assert "boom" in b.request("alpha", Command.make("bug")).reason
+    nobody = b.request("gamma", Command.make("ok"), timeout=0.3)
+    assert not nobody.ok and "no reply from node 'gamma'" in nobody.reason
+
+
+def test_presence_follows_the_session(pair: tuple[Bus, Bus]) -> None:
+    a, b = pair
+    events: list[tuple[str, bool]] = []
+    gone = threading.Event()
+
+    def on(node: str, alive: bool) -> None:
+        events.append((node, alive))
+        if node == "alpha" and not alive:
+            gone.set()
+
+    a.announce()
+    b.watch_presence(on)
+    time.sleep(0.3)
+    assert "alpha" in b.alive_nodes(1.0)
+    a.close()
+    assert wait(gone)
+    assert ("alpha", True) in events and events[-1] == ("alpha", False)
+
+
+def test_config_validation() -> None:
+    with pytest.raises(InputError):
+        BusConfig(cell="Bad Cell")
+    with pytest.raises(InputError):
+        BusConfig(connect=("127.0.0.1",))
+    cfg = BusConfig(cell="c", connect=("tcp/127.0.0.1:1",))
+    assert BusConfig.from_json(cfg.to_json()) == cfg

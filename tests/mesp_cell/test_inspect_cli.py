@@ -1,0 +1,104 @@
+"""`mesp inspect`: report section, pictures, baselines and one-line errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from mesp_cell.cli import main
+from sim.baseline import PlanarConfig, planar_toolpath
+from sim.deposition import EllipseMorphology
+from slicer.report import read_report
+
+
+@pytest.fixture()
+def job(tmp_path: Path) -> Path:
+    box = trimesh.creation.box(extents=[5.0, 5.0, 3.0])
+    box.apply_translation([2.5, 2.5, 1.5])
+    morph = EllipseMorphology(beta=0.7)
+    tp = planar_toolpath(box.vertices, box.faces, morph,
+                         PlanarConfig(beta=0.7, width_mode="volume", perimeters=1))
+    out = tmp_path / "job"
+    out.mkdir()
+    tp.save(out)
+    box.export(out / "model.ply")
+    return out
+
+
+def test_inspect_writes_report_and_pictures(job: Path, capsys: pytest.CaptureFixture[str]
+                                            ) -> None:
+    assert main(["inspect", str(job), "--voxel", "0.25", "--quiet"]) == 0
+    section = read_report(job)["inspect"]
+    for key in ("infill_ratio", "pore_ratio", "over_deposition", "surface_error_mm",
+                "per_layer", "voxel_mm", "volume_conservation_error"):
+        assert key in section
+    assert set(section["surface_error_mm"]) >= {"mean", "p95", "max"}
+    assert 0.8 < section["infill_ratio"] <= 1.0
+    assert abs(section["volume_conservation_error"]) < 0.02
+    for name in section["figures"]:
+        assert (job / name).stat().st_size > 1000
+    out = capsys.readouterr().out
+    assert "infill ratio %" in out and "multi-axis" in out
+
+
+def test_inspect_with_planar_and_gcode_baselines(job: Path) -> None:
+    assert main(["inspect", str(job), "--voxel", "0.5", "--baseline", "planar", "--quiet",
+                 "--no-figures"]) == 0
+    base = read_report(job)["inspect"]["baseline"]
+    assert base["kind"] == "planar" and "surface_error_mm" in base
+    comparison = read_report(job)["inspect"]["comparison"]
+    assert comparison["surface_error_mean_mm"]["paper_planar"] == 0.49
+    gcode = job / "part.gcode"
+    lines = ["G21", "G90", "M82", "G92 E0"]
+    e = 0.0
+    for k, z in enumerate(np.arange(0.3, 3.0, 0.6)):
+        lines.append(f"G0 X100 Y{100 + 0.5 * (k % 2)} Z{z:.2f}")
+        for j in range(5):
+            y = 100 + j + 0.5
+            e += 5.0 * 0.6 * 1.0
+            lines += [f"G0 X100 Y{y}", f"G1 X105 Y{y} E{e:.4f}"]
+    gcode.write_text("\n".join(lines) + "\n")
+    assert main(["inspect", str(job), "--voxel", "0.5", "--gcode", str(gcode), "--filament",
+                 "0", "--quiet", "--no-figures"]) == 0
+    base = read_report(job)["inspect"]["baseline"]
+    assert base["kind"] == "gcode"
+    assert base["commanded_volume_mm3"] == pytest.approx(75.0, rel=0.01)
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["inspect", "{missing}"], "does not exist"),
+        (["inspect", "{empty}"], "toolpath.npz"),
+        (["inspect", "{job}", "--voxel", "0"], "--voxel"),
+        (["inspect", "{job}", "--voxel", "-1"], "--voxel"),
+        (["inspect", "{job}", "--gcode", "{missing}"], "does not exist"),
+    ],
+)
+def test_user_mistakes_are_one_line(job: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                    args: list[str], needle: str) -> None:
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    subs = {"missing": str(tmp_path / "nope"), "empty": str(empty), "job": str(job)}
+    argv = [a.format(**subs) for a in args]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1
+    assert err.startswith("mesp: error:") and needle in err
+    assert "Traceback" not in err
+
+
+def test_default_voxel_coarsens_for_large_models() -> None:
+    from mesp_cell.commands.inspect import AUTO_VOXEL_BUDGET, DEFAULT_VOXEL_MM, _auto_voxel
+    from mesp_cell.console import ConsoleProgress
+
+    quiet = ConsoleProgress(quiet=True)
+    small = np.array([[0.0, 0.0, 0.0], [30.0, 30.0, 30.0]])
+    assert _auto_voxel(small, quiet) == DEFAULT_VOXEL_MM
+    big = np.array([[0.0, 0.0, 0.0], [200.0, 150.0, 120.0]])
+    v = _auto_voxel(big, quiet)
+    assert v > DEFAULT_VOXEL_MM
+    assert np.prod((np.ptp(big, axis=0) + 8.0) / v) <= AUTO_VOXEL_BUDGET

@@ -1,0 +1,94 @@
+"""The SQLite job store: transitions, checkpoints, concurrent access."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from mesp_cell.jobs import JobStore, check_submission
+from slicer.errors import InputError
+
+
+@pytest.fixture
+def store(tmp_path: Path) -> JobStore:
+    return JobStore(tmp_path / "jobs.sqlite")
+
+
+@pytest.fixture
+def model(tmp_path: Path) -> Path:
+    p = tmp_path / "My Part.stl"
+    p.write_text("solid x\nendsolid x\n")
+    return p
+
+
+def test_lifecycle_and_history(store: JobStore, model: Path, tmp_path: Path) -> None:
+    job = store.submit(model, "sim", tmp_path / "jobs")
+    assert job.id == "my-part-0001" and job.state == "submitted" and Path(job.dir).is_dir()
+    for state in ("sliced", "planned", "printing", "interrupted", "printing", "done"):
+        store.transition(job.id, state)
+    assert [to for _, _, to, _ in store.history(job.id)] == [
+        "submitted", "sliced", "planned", "printing", "interrupted", "printing", "done"]
+
+
+def test_invalid_transitions_are_refused_with_the_reason(store: JobStore, model: Path,
+                                                         tmp_path: Path) -> None:
+    job = store.submit(model, "sim", tmp_path / "jobs")
+    with pytest.raises(InputError, match="submitted; it can become only"):
+        store.transition(job.id, "printing")
+    store.transition(job.id, "aborted")
+    with pytest.raises(InputError, match="finished job cannot become printing"):
+        store.transition(job.id, "printing")
+    with pytest.raises(InputError, match="only a paused or interrupted job"):
+        store.request_resume(job.id)
+    with pytest.raises(InputError, match="no job"):
+        store.get("nope")
+    with pytest.raises(InputError, match="not a job state"):
+        store.transition(job.id, "flying")
+
+
+def test_checkpoint_only_moves_forward_and_resume_flag(store: JobStore, model: Path,
+                                                      tmp_path: Path) -> None:
+    job = store.submit(model, "sim", tmp_path / "jobs")
+    for state in ("sliced", "planned", "printing"):
+        store.transition(job.id, state)
+    store.checkpoint(job.id, 1, 30, 600)
+    store.checkpoint(job.id, 0, 10, 200)  # a late, older event must not move it back
+    rec = store.get(job.id)
+    assert (rec.layer, rec.waypoint, rec.sample) == (1, 30, 600)
+    store.transition(job.id, "paused")
+    assert store.next_pending("sim") is None
+    store.request_resume(job.id)
+    nxt = store.next_pending("sim")
+    assert nxt is not None and nxt.id == job.id and nxt.resume == 1
+    assert store.next_pending("other") is None
+    assert store.transition(job.id, "printing").resume == 0
+
+
+def test_two_connections_see_each_other(store: JobStore, model: Path, tmp_path: Path) -> None:
+    other = JobStore(store.path)
+    job = store.submit(model, "sim", tmp_path / "jobs")
+    other.transition(job.id, "sliced")
+    assert store.get(job.id).state == "sliced"
+    with pytest.raises(InputError, match="not submitted"):
+        store.transition(job.id, "failed", expect="submitted")
+    second = other.submit(model, "sim", tmp_path / "jobs")
+    assert second.id != job.id
+    assert [j.id for j in store.query("sim")] == [job.id, second.id]
+
+
+def test_submission_checks(model: Path, tmp_path: Path) -> None:
+    check_submission(model)
+    with pytest.raises(InputError, match="does not exist"):
+        check_submission(tmp_path / "none.stl")
+    bad = tmp_path / "x.docx"
+    bad.write_text("x")
+    with pytest.raises(InputError, match="unsupported type"):
+        check_submission(bad)
+    job = tmp_path / "job.toml"
+    job.write_text("[slicing\n")
+    with pytest.raises(InputError, match="not valid TOML"):
+        check_submission(model, job_file=job)
+    job.write_text("[nonsense]\nx = 1\n")
+    with pytest.raises(InputError, match="nonsense"):
+        check_submission(model, job_file=job)

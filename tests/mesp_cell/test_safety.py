@@ -1,0 +1,223 @@
+"""Safety of the running cell: real processes on the real bus, the twin and the emulator.
+
+One simulated cell (synthetic slicing/planning, see ``synthetic.py``) serves the whole module;
+each test submits its own small job (~3 s of printing).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from mesp_cell.drivers import registers as R
+from mesp_cell.drivers.extruder_modbus import ModbusExtruder
+from mesp_cell.launcher import CellClient, Launch, start_cell
+from mesp_cell.messages import FAULT_ESTOP, ExtruderState, RobotState, WaypointReached
+from slicer.errors import InputError
+from tests.mesp_cell import synthetic
+
+ALL_WAYPOINTS = set(range(synthetic.LAYERS * synthetic.PER_LAYER))
+
+
+class Recorder:
+    """Collects waypoint events and the latest robot/extruder states from the bus."""
+
+    def __init__(self, client: CellClient) -> None:
+        self.lock = threading.Lock()
+        self.waypoints: dict[str, list[int]] = {}
+        self.robot: RobotState | None = None
+        self.extruder: list[tuple[float, ExtruderState]] = []
+        bus = client.bus()
+        bus.subscribe("robot", "waypoint", WaypointReached, self._wp)
+        bus.subscribe("robot", "state", RobotState, self._robot)
+        bus.subscribe("extruder", "state", ExtruderState, self._ext)
+
+    def _wp(self, m: WaypointReached) -> None:
+        with self.lock:
+            self.waypoints.setdefault(m.job_id, []).append(m.waypoint)
+
+    def _robot(self, m: RobotState) -> None:
+        self.robot = m
+
+    def _ext(self, m: ExtruderState) -> None:
+        with self.lock:
+            self.extruder.append((time.time(), m))
+            del self.extruder[:-500]
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Launch]:
+    home = tmp_path_factory.mktemp("mesp_home")
+    old = os.environ.get("MESP_HOME")
+    os.environ["MESP_HOME"] = str(home)
+    launch = start_cell(overrides={"slice_fn": "tests.mesp_cell.synthetic:slice_job",
+                                   "plan_fn": "tests.mesp_cell.synthetic:plan_job",
+                                   "prime_s": 0.1})
+    try:
+        yield launch
+    finally:
+        launch.stop()
+        if old is None:
+            os.environ.pop("MESP_HOME", None)
+        else:
+            os.environ["MESP_HOME"] = old
+
+
+@pytest.fixture(scope="module")
+def client(cell: Launch) -> Iterator[CellClient]:
+    c = cell.client()
+    yield c
+    c.close()
+
+
+@pytest.fixture(scope="module")
+def rec(client: CellClient) -> Recorder:
+    return Recorder(client)
+
+
+@pytest.fixture
+def model(tmp_path: Path) -> Path:
+    path = tmp_path / "ring.stl"
+    path.write_text("solid ring\nendsolid ring\n")
+    return path
+
+
+def wait_percent(client: CellClient, job_id: str, percent: float) -> None:
+    end = time.monotonic() + 30
+    while time.monotonic() < end:
+        job = client.status(job_id)
+        if job.state == "printing" and job.percent >= percent:
+            return
+        assert job.state in ("submitted", "sliced", "planned", "printing"), job.reason
+        time.sleep(0.02)
+    raise AssertionError("the print did not progress")
+
+
+def resume_and_finish(cell: Launch, client: CellClient, rec: Recorder, job_id: str,
+                      node: str) -> None:
+    assert cell.wait_alive(node), f"{node} was not restarted"
+    picked = client.resume(job_id)
+    assert picked.resume == 0, "the supervisor did not pick the job up"
+    job = client.wait(job_id, timeout=30)
+    assert job.state == "done", job.reason
+    printed = rec.waypoints[job_id]
+    assert len(printed) == len(set(printed)), "a waypoint was printed twice"
+    assert set(printed) == ALL_WAYPOINTS, "a waypoint was skipped"
+    assert printed == sorted(printed)
+
+
+def test_small_print_completes(client: CellClient, rec: Recorder, model: Path) -> None:
+    job = client.submit(model)
+    done = client.wait(job.id, timeout=30)
+    assert done.state == "done", done.reason
+    assert sorted(rec.waypoints.get(job.id, [])) == sorted(ALL_WAYPOINTS), done
+    assert done.waypoint == max(ALL_WAYPOINTS) and done.layer == synthetic.LAYERS - 1, done
+    assert done.percent == 100.0, done
+    # Constant rate C over ~2.4 s of deposition plus priming: the totaliser saw it.
+    assert 5.0 < done.volume < 6.57 * 6, done
+    history = [to for _, _, to, _ in client.store.history(job.id)]
+    assert history == ["submitted", "sliced", "planned", "printing", "done"], history
+
+
+def test_killing_extruder_stops_robot_and_resume_completes(
+        cell: Launch, client: CellClient, rec: Recorder, model: Path) -> None:
+    job = client.submit(model)
+    wait_percent(client, job.id, 35.0)
+    t_kill = time.time()
+    os.kill(cell.pid("extruder"), signal.SIGKILL)
+    stopped = client.wait(job.id, timeout=10)
+    assert stopped.state == "interrupted"
+    assert "extruder" in stopped.reason
+    time.sleep(0.1)
+    assert rec.robot is not None and rec.robot.stop_t > t_kill
+    latency = rec.robot.stop_t - t_kill
+    print(f"robot servoStop {latency * 1000:.1f} ms after kill -9 of the extruder")
+    assert latency < 0.1, f"robot stopped {latency * 1000:.0f} ms after the extruder died"
+    # The checkpoint is the last waypoint deposited before the stop.
+    assert stopped.waypoint == rec.waypoints[job.id][-1]
+    assert 0 < stopped.waypoint < max(ALL_WAYPOINTS)
+    resume_and_finish(cell, client, rec, job.id, "extruder")
+
+
+def test_killing_robot_stops_extruder(cell: Launch, client: CellClient, rec: Recorder,
+                                      model: Path) -> None:
+    job = client.submit(model)
+    wait_percent(client, job.id, 35.0)
+    t_kill = time.time()
+    os.kill(cell.pid("robot"), signal.SIGKILL)
+    stopped = client.wait(job.id, timeout=10)
+    assert stopped.state == "interrupted" and "robot" in stopped.reason
+    with rec.lock:
+        after = [(t, m) for t, m in rec.extruder if t > t_kill]
+    assert after and not after[-1][1].running, "the extruder kept running"
+    resume_and_finish(cell, client, rec, job.id, "robot")
+
+
+def test_estop_stops_both(cell: Launch, client: CellClient, rec: Recorder, model: Path) -> None:
+    job = client.submit(model)
+    wait_percent(client, job.id, 30.0)
+    client.estop("test")
+    stopped = client.wait(job.id, timeout=10)
+    assert stopped.state == "interrupted" and "e-stop" in stopped.reason
+    time.sleep(0.1)
+    with rec.lock:
+        last = rec.extruder[-1][1]
+    assert not last.running and last.fault & FAULT_ESTOP
+    assert rec.robot is not None and rec.robot.mode != "streaming"
+    # Nothing moves while the e-stop is latched; after the reset the job finishes.
+    client.resume(job.id)
+    refused = client.wait(job.id, timeout=10)
+    assert refused.state == "interrupted" and "e-stop" in refused.reason
+    assert client.reset_estop() == []
+    resume_and_finish(cell, client, rec, job.id, "robot")
+
+
+def test_modbus_disconnect_fails_safe(cell: Launch, client: CellClient, rec: Recorder,
+                                      model: Path) -> None:
+    job = client.submit(model)
+    wait_percent(client, job.id, 30.0)
+    injector = ModbusExtruder("127.0.0.1", int(cell.spec.vars["extruder_port"]))
+    t_inject = time.monotonic()
+    injector.inject(R.INJECT_DISCONNECT, 3.0)
+    injector.close()
+    stopped = client.wait(job.id, timeout=10)
+    assert stopped.state == "interrupted"
+    assert "extruder" in stopped.reason
+    # While the link is down, the node reports it after its retries, never a running motor.
+    end = time.monotonic() + 2.0
+    while time.monotonic() < end and rec.extruder[-1][1].connected:
+        time.sleep(0.02)
+    with rec.lock:
+        last = rec.extruder[-1][1]
+    assert not last.connected and not last.running and last.fault
+    assert time.monotonic() - t_inject < 3.0, "the link fault was reported too late"
+    time.sleep(max(0.0, 3.3 - (time.monotonic() - t_inject)))  # the link is back
+    resume_and_finish(cell, client, rec, job.id, "extruder")
+
+
+def test_bad_inputs_are_refused_before_anything_moves(
+        cell: Launch, client: CellClient, rec: Recorder, model: Path, tmp_path: Path) -> None:
+    bad_job = tmp_path / "job.toml"
+    bad_job.write_text("[slicing]\nlayer_height_mm = 'thick'\n")
+    with pytest.raises(InputError) as err:
+        client.submit(model, job_file=bad_job)
+    assert "\n" not in err.value.one_line() and "layer_height_mm" in err.value.one_line()
+    with pytest.raises(InputError) as err:
+        client.submit(tmp_path / "missing.stl")
+    assert "does not exist" in err.value.one_line()
+    far = tmp_path / "far_cell.toml"
+    far.write_text("[tank]\nfloor_center_mm = [1400.0, 0.0, 8.0]\n[placement]\nsearch = false\n")
+    samples_before = rec.robot.seq if rec.robot else 0
+    job = client.submit(model, cell_file=far)
+    failed = client.wait(job.id, timeout=30)
+    assert failed.state == "failed"
+    assert "reach" in failed.reason and "\n" not in failed.reason
+    assert job.id not in rec.waypoints
+    assert rec.robot is not None and rec.robot.seq > samples_before
+    assert rec.robot.job_id != job.id  # no trajectory of this job was ever loaded

@@ -1,0 +1,164 @@
+"""Trajectory checks, resampling, the servo loop on the twin, and the interlock mask."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mesp_cell.drivers.robot_base import ServoConfig, ur5e_flange
+from mesp_cell.drivers.robot_twin import KinematicTwin
+from mesp_cell.drivers.stream import ServoStream, StreamPlan, sha256_of
+from mesp_cell.nodes.robot_node import must_run_mask
+from slicer.artifacts import save_npz
+from slicer.errors import InputError
+from tests.mesp_cell import synthetic
+
+N_WP = synthetic.LAYERS * synthetic.PER_LAYER
+
+
+@pytest.fixture
+def job(tmp_path: Path) -> Path:
+    synthetic.toolpath().save(tmp_path)
+    save_npz(tmp_path / "trajectory.npz", synthetic.trajectory_arrays(N_WP))
+    return tmp_path
+
+
+def fast_twin() -> KinematicTwin:
+    return KinematicTwin(ServoConfig(time_scale=1000.0), q0=synthetic.HOME)
+
+
+def test_resampling_keeps_every_waypoint_in_order(job: Path) -> None:
+    plan = StreamPlan.load(job / "trajectory.npz", 0.002, sha256_of(job / "trajectory.npz"))
+    arrays = synthetic.trajectory_arrays(N_WP)
+    duration = arrays["t"][-1]
+    assert plan.samples == round(duration / 0.002) + 1
+    assert np.array_equal(plan.wp_id, np.arange(N_WP))
+    assert np.all(np.diff(plan.wp_sample) > 0)
+    # Waypoint i is at t = sample_i / 100 Hz -> servo sample 5 * that trajectory sample.
+    src = np.flatnonzero(arrays["waypoint"] >= 0)
+    assert np.array_equal(plan.wp_sample, src * 5)
+    assert np.allclose(plan.q[::5], arrays["q"][: plan.samples // 5 + 1])
+    assert np.array_equal(plan.wp_layer, np.repeat(np.arange(synthetic.LAYERS),
+                                                   synthetic.PER_LAYER))
+    assert plan.sample_of_waypoint(-1) == 0 and plan.sample_of_waypoint(3) == src[3] * 5
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda a: a["q"].__setitem__((5, 2), np.nan), "NaN"),
+    (lambda a: a["q"].__setitem__((5, 2), 7.0), "beyond the UR5e limit"),
+    (lambda a: a["q"].__setitem__((slice(50, None), 0), a["q"][50:, 0] + 0.5), "deg/s"),
+    (lambda a: a["t"].__setitem__(3, a["t"][2]), "does not increase"),
+    (lambda a: a["waypoint"].__setitem__(0, 50), "not increasing"),
+])
+def test_bad_trajectories_are_refused_before_motion(tmp_path: Path, mutate, message) -> None:  # type: ignore[no-untyped-def]
+    arrays = synthetic.trajectory_arrays(N_WP)
+    mutate(arrays)
+    save_npz(tmp_path / "trajectory.npz", arrays)
+    with pytest.raises(InputError, match=message) as err:
+        StreamPlan.load(tmp_path / "trajectory.npz", 0.002)
+    assert "\n" not in err.value.one_line()
+
+
+def test_changed_or_missing_files_are_refused(job: Path) -> None:
+    with pytest.raises(InputError, match="sha256"):
+        StreamPlan.load(job / "trajectory.npz", 0.002, "0" * 64)
+    with pytest.raises(InputError, match="does not exist"):
+        StreamPlan.load(job / "nothing.npz", 0.002)
+    (job / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(InputError, match="not a readable"):
+        StreamPlan.load(job / "bad.npz", 0.002)
+
+
+def test_stream_reports_each_waypoint_once_across_a_stop_and_resume(job: Path) -> None:
+    plan = StreamPlan.load(job / "trajectory.npz", 0.002)
+    twin = fast_twin()
+    twin.connect()
+    seen: list[int] = []
+    stop_at = int(plan.wp_sample[25]) + 2
+    first = ServoStream(twin, plan, 0, guard=lambda k: "halt" if k == stop_at else "",
+                        on_waypoint=lambda i: seen.append(int(plan.wp_id[i]))).run()
+    assert not first.done and first.reason == "halt" and first.last_sample == stop_at - 1
+    checkpoint = seen[-1]
+    assert checkpoint == 25
+    start = plan.sample_of_waypoint(checkpoint)
+    second = ServoStream(twin, plan, start, after_waypoint=checkpoint,
+                         on_waypoint=lambda i: seen.append(int(plan.wp_id[i]))).run()
+    assert second.done and second.last_sample == plan.samples - 1
+    assert seen == list(range(N_WP))
+    assert twin.stop_times and len(twin.stop_times) == 2  # servoStop ends every stream
+    # The twin tracks with a first-order lag tau = lookahead * 75 / gain: its error is at most
+    # the commanded joint speed times tau.
+    tau = twin.servo.lookahead_s * 75 / twin.servo.gain
+    speed = np.abs(np.diff(plan.q, axis=0)).max() / plan.dt
+    assert np.max(np.abs(twin.joints() - plan.q[-1])) <= 1.05 * speed * tau
+
+
+def test_protective_stop_and_link_loss_end_the_stream(job: Path) -> None:
+    plan = StreamPlan.load(job / "trajectory.npz", 0.002)
+    twin = fast_twin()
+    twin.connect()
+
+    def pstop(k: int) -> None:
+        if k == 100:
+            twin.inject_protective_stop()
+
+    result = ServoStream(twin, plan, 0, on_sample=pstop).run()
+    assert result.reason == "protective stop" and result.last_sample == 100
+    twin.clear_protective_stop()
+    twin.inject_link_loss()
+    result = ServoStream(twin, plan, 0).run()
+    assert "link" in result.reason and result.last_sample == -1
+    assert twin.reconnect() and twin.move_j(synthetic.HOME)
+
+
+def test_a_stalled_servo_loop_stops_the_stream(job: Path) -> None:
+    plan = StreamPlan.load(job / "trajectory.npz", 0.002)
+    twin = fast_twin()
+    twin.connect()
+
+    def stall(k: int) -> None:
+        if k == 10:
+            time.sleep(1.5 * twin.servo.overrun_s)
+
+    result = ServoStream(twin, plan, 0, on_sample=stall).run()
+    assert not result.done and "watchdog" in result.reason and result.last_sample == 10
+
+
+def test_must_run_mask() -> None:
+    extrude = np.array([0, 0, 1, 1, 1, 1, 1, 0, 0, 1, 1, 1], bool)
+    # lead 2: switch-on at 0 (for 2), off at 5 (for 7), on again at 7 (for 9);
+    # margin 1: the sample right after a switch-on is not yet required.
+    mask = must_run_mask(extrude, lead_n=2, margin_n=1, start=0)
+    expected = np.array([0, 0, 1, 1, 1, 0, 0, 0, 0, 1, 1, 1], bool)
+    assert np.array_equal(mask, expected)
+    assert not np.any(mask & ~extrude)
+
+
+def test_flange_kinematics_home_pose() -> None:
+    # All joints zero: the UR5e arm stretched along -x; flange at x = a2 + a3, y = -(d4 + d6),
+    # z = d1 - d5.
+    T = ur5e_flange(np.zeros(6))
+    assert np.allclose(T[:3, 3], [-817.2, -232.9, 62.8], atol=1e-6)
+    assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3))
+
+
+def test_mujoco_backend_tracks_the_stream(job: Path) -> None:
+    from mesp_cell.drivers.robot_twin import mujoco_twin
+    from planner import kinematics as kin
+    from planner.cell import load_cell
+
+    plan = StreamPlan.load(job / "trajectory.npz", 0.002)
+    twin = mujoco_twin(ServoConfig(time_scale=1000.0), q0=synthetic.HOME)
+    twin.connect()
+    errors: list[float] = []
+    result = ServoStream(twin, plan, 0, on_sample=lambda k: errors.append(
+        float(np.max(np.abs(twin.joints() - plan.q[k]))))).run()
+    assert result.done
+    assert max(errors) < 0.01  # rad: position + velocity actuators follow without lag
+    tool = load_cell().tool.tool_T.copy()
+    tool[:3, 3] /= 1000.0
+    expected = kin.fk(twin.joints()[None], tool)[0, :3, 3] * 1000.0
+    assert np.allclose(twin.tcp_mm(), expected, atol=0.5)  # mm, same kinematics as planner

@@ -1,0 +1,147 @@
+"""Nozzle orientation: alpha = 90 by default, a tilt within [70, 110] deg near a wall."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from planner.cell import CellConfig
+from planner.orientation import (
+    COLLISION,
+    OK,
+    Reach,
+    alpha_of,
+    nozzle_axis,
+    tool_rotation,
+)
+from planner.placement import model_transform
+from planner.plan import plan, resample
+from slicer.stages import Toolpath
+from tests.planner.synthetic import make_toolpath
+
+
+def test_axis_and_alpha_are_consistent() -> None:
+    rng = np.random.default_rng(0)
+    n = rng.normal(size=(50, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    t = np.cross(n, rng.normal(size=(50, 3)))
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    for deg in (-20.0, 0.0, 20.0):
+        ax = nozzle_axis(n, t, np.full(50, np.radians(deg)))
+        assert np.allclose(np.degrees(alpha_of(ax, t)), 90.0 - deg)
+    ax = nozzle_axis(n, t, np.zeros(50))
+    assert np.allclose(ax, -n)
+    # motion leaving the layer: alpha0 = angle(-n, t) and the tilt shifts it one to one
+    climb = (t + 0.3 * n) / np.linalg.norm(t + 0.3 * n, axis=1, keepdims=True)
+    a0 = np.degrees(alpha_of(-n, climb))
+    ax = nozzle_axis(n, climb, np.full(50, np.radians(10.0)))
+    assert np.allclose(np.degrees(alpha_of(ax, climb)), a0 - 10.0)
+    R = tool_rotation(ax, rng.uniform(-3, 3, 50))
+    assert np.allclose(R @ np.swapaxes(R, 1, 2), np.eye(3), atol=1e-12)
+    assert np.allclose(R[:, :, 2], ax)
+
+
+def _wall_case(cell: CellConfig) -> tuple[CellConfig, Toolpath]:
+    """A line on a layer sloping 25 deg down towards the +x tank wall, moving to the wall.
+
+    The normal leans 25 deg towards the wall, so at alpha = 90 deg the nozzle shaft and the
+    extruder lean over the wall; tilting back (alpha < 90) clears it.
+    """
+    lean = np.radians(25.0)
+    x = np.arange(0.0, 20.0 + 1e-9, 0.5)
+    pos = np.stack([x, np.zeros_like(x), 15.0 - x * np.tan(lean)], axis=1)
+    normal = np.tile([np.sin(lean), 0.0, np.cos(lean)], (len(x), 1))
+    tp = make_toolpath(pos, normal, np.zeros(len(x), np.int32))
+    # bbox bottom centre 80 mm from the tank centre: the line ends 60 mm from the wall
+    placement = dataclasses.replace(cell.placement, offset_mm=(80.0, 0.0, 10.0), yaw_deg=0.0,
+                                    search=False)
+    return dataclasses.replace(cell, placement=placement), tp
+
+
+def test_wall_forces_a_tilt_within_the_allowed_range(cell: CellConfig) -> None:
+    wall_cell, tp = _wall_case(cell)
+    reach = Reach(wall_cell)
+    # at alpha = 90 deg no spin clears the wall at the end of the line
+    model_T = model_transform(wall_cell, (tp.position.min(0), tp.position.max(0)),
+                              np.array(wall_cell.placement.offset_mm), 0.0)
+    s = resample(tp, model_T, wall_cell)
+    end = np.array([len(s.tcp) - 1])
+    ax = nozzle_axis(s.normal[end], s.tangent[end], np.array([0.0]))
+    grid = np.linspace(-np.pi, np.pi, 24, endpoint=False)
+    q = reach.solve(np.repeat(s.tcp[end], 24, axis=0),
+                    tool_rotation(np.repeat(ax, 24, axis=0), grid), reach.home)
+    ev = reach.check(q)
+    assert not np.any(ev.status == OK)
+    assert np.any(ev.status == COLLISION)
+
+    result = plan(tp, wall_cell)
+    rep = result.report
+    assert rep["unreachable"]["count"] == 0
+    a = result.trajectory.alpha[result.trajectory.extrude]
+    assert a.min() >= 70.0 - 1e-6 and a.max() <= 110.0 + 1e-6
+    assert np.abs(a - 90.0).max() > 4.0  # it did tilt
+    assert a.min() < 90.0  # back, away from the wall
+    assert rep["alpha_deg"]["tilted_samples"] > 0
+    assert rep["min_clearance_mm"] >= wall_cell.planning.clearance_mm - 1e-6
+
+
+@pytest.mark.parametrize("name", ["lines_tp", "spiral_tp"])
+def test_flat_layers_print_at_alpha_90(name: str, request: pytest.FixtureRequest,
+                                        cell: CellConfig) -> None:
+    result = plan(request.getfixturevalue(name), cell)
+    tr = result.trajectory
+    inner = tr.extrude & (tr.waypoint >= 0)
+    assert np.all(np.abs(tr.alpha[inner] - 90.0) < 1.0)  # the spiral climbs 0.9 deg
+    assert result.report["unreachable"]["count"] == 0
+
+
+def test_unreachable_waypoints_are_reported_with_reasons(cell: CellConfig) -> None:
+    wall_cell, tp = _wall_case(cell)
+    normal = np.array(tp.normal)
+    lean = np.radians(70.0)  # far beyond what a 20 deg tilt can repair next to the wall
+    normal[30:33] = [np.sin(lean), 0.0, np.cos(lean)]
+    bad = make_toolpath(np.array(tp.position), normal, np.zeros(len(tp), np.int32))
+    # placement is fixed and checks only a subsample; the plan itself must report them
+    result = plan(bad, wall_cell, placement=_fixed_placement(wall_cell, bad))
+    un = result.report["unreachable"]
+    assert un["count"] >= 3
+    covered = set()
+    for run in un["waypoints"]:
+        covered |= set(range(run["first"], run["last"] + 1))
+        assert run["reason"]
+    assert {30, 31, 32} <= covered
+    assert result.status == "unreachable waypoints"
+
+
+def _fixed_placement(cell: CellConfig, tp: Toolpath):  # type: ignore[no-untyped-def]
+    from planner.placement import Placement
+
+    box = (tp.position.min(0), tp.position.max(0))
+    T = model_transform(cell, box, np.array(cell.placement.offset_mm), cell.placement.yaw_deg)
+    return Placement(T, cell.placement.offset_mm, cell.placement.yaw_deg, 0, 0.0, 1, 0, -1)
+
+
+def test_ramp_keeps_peaks_and_limits_the_slope() -> None:
+    from planner.orientation import _ramp
+
+    dev = np.zeros(60)
+    dev[20:25] = 0.2
+    dev[45] = -0.1
+    out = _ramp(dev, 0.05)
+    assert np.allclose(out[20:25], 0.2) and np.isclose(out[45], -0.1)
+    assert np.abs(np.diff(out)).max() <= 0.05 + 1e-12
+    assert np.all(np.abs(out) >= np.abs(dev) - 1e-12)
+
+
+def test_tilt_levels_start_at_zero_and_respect_alpha(cell: CellConfig) -> None:
+    from planner.orientation import tilt_levels
+
+    levels = np.degrees(tilt_levels(cell, np.radians(np.array([90.0]))))
+    assert levels[0] == 0.0
+    assert np.all(np.abs(np.diff(np.abs(levels))) >= -1e-9)  # by size
+    assert levels.min() >= -20.0 - 1e-9 and levels.max() <= 20.0 + 1e-9
+    # a steeply climbing move (alpha0 = 115) needs at least a 5 deg tilt
+    climb = np.degrees(tilt_levels(cell, np.radians(np.array([115.0]))))
+    assert climb.min() >= 0.0 - 1e-9 and 25.0 in np.round(climb, 9) and 45.0 in np.round(climb, 9)

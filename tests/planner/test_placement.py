@@ -1,0 +1,49 @@
+"""Model placement: search, fit checks, and refusal of an unreachable placement."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from planner.cell import CellConfig
+from planner.orientation import Reach
+from planner.placement import choose_placement
+from slicer.errors import InputError
+from slicer.stages import Toolpath
+from tests.planner import synthetic
+
+
+def test_search_keeps_model_inside_tank(cell: CellConfig, dome_tp: Toolpath) -> None:
+    p = choose_placement(Reach(cell), dome_tp)
+    assert p.unreachable == 0
+    pts = dome_tp.position @ p.model_T[:3, :3].T + p.model_T[:3, 3]
+    local = pts - cell.tank_in_base[:3, 3]
+    half = np.array(cell.tank.inner_size_mm[:2]) / 2 - cell.placement.wall_margin_mm
+    assert np.all(np.abs(local[:, :2]) <= half + 1e-6)
+    assert np.isclose(local[:, 2].min(), cell.placement.offset_mm[2])
+
+
+def test_unreachable_placement_is_refused_with_a_clear_message(cell: CellConfig) -> None:
+    steep = synthetic.dome(radius=30.0, cap=12.0, rings=4, step=1.0)  # 44 deg normals
+    fixed = dataclasses.replace(cell, placement=dataclasses.replace(cell.placement, search=False))
+    with pytest.raises(InputError) as err:
+        choose_placement(Reach(fixed), steep)
+    text = str(err.value)
+    assert "unreachable" in text and "waypoint" in text
+    assert "collision" in text and "nozzle" in text  # what is wrong and what to change
+
+
+def test_out_of_reach_tank_is_refused(cell: CellConfig, lines_tp: Toolpath) -> None:
+    far_tank = dataclasses.replace(cell.tank, floor_center_mm=(1400.0, 0.0, 8.0))
+    far = dataclasses.replace(cell, tank=far_tank,
+                              placement=dataclasses.replace(cell.placement, search=False))
+    with pytest.raises(InputError, match="out of reach"):
+        choose_placement(Reach(far), lines_tp)
+
+
+def test_model_taller_than_gel_is_refused(cell: CellConfig) -> None:
+    tall = synthetic.spiral(turns=2.0, radius=20.0, height=150.0)
+    with pytest.raises(InputError, match="gel"):
+        choose_placement(Reach(cell), tall)

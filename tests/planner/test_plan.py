@@ -1,0 +1,70 @@
+"""The whole plan: trajectory file, targets reached, report keys, the `mesp plan` command."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from mesp_cell.cli import main
+from planner import kinematics as kin
+from planner.plan import PlanResult
+from planner.trajectory import Trajectory
+from slicer.report import read_report
+from slicer.stages import Toolpath
+
+
+def test_trajectory_reaches_every_waypoint(dome_plan: PlanResult, dome_tp: Toolpath) -> None:
+    tr = dome_plan.trajectory
+    wp = tr.waypoint >= 0
+    assert np.array_equal(tr.waypoint[wp], np.arange(len(dome_tp)))
+    target = dome_tp.position @ tr.model_T[:3, :3].T + tr.model_T[:3, 3]
+    assert np.allclose(tr.tcp[wp], target, atol=1e-6)
+    tool = tr.tool_T.copy()
+    tool[:3, 3] /= 1000.0
+    T = kin.fk(tr.q, tool)
+    assert np.allclose(T[:, :3, 3] * 1000.0, tr.tcp, atol=1e-6)
+    normal = dome_tp.normal @ tr.model_T[:3, :3].T
+    # the nozzle axis is -normal where no tilt was needed
+    assert np.allclose(T[wp, :3, 2], -normal, atol=1e-6)
+    # between samples the TCP never jumps more than max_step_mm
+    assert np.linalg.norm(np.diff(tr.tcp, axis=0), axis=1).max() <= 2.0 + 1e-9
+
+
+def test_report_has_the_plan_keys(dome_plan: PlanResult) -> None:
+    rep = dome_plan.report
+    for key in ("duration_s", "min_clearance_mm", "alpha_deg", "joint_margin_deg",
+                "speed_ratio", "unreachable", "over_deposition", "status"):
+        assert key in rep
+    assert rep["status"] == "ok"
+    assert rep["min_clearance_mm"] >= 3.0
+    assert np.isclose(rep["duration_s"], dome_plan.trajectory.t[-1])
+
+
+def test_trajectory_round_trip(dome_plan: PlanResult, tmp_path: Path) -> None:
+    dome_plan.trajectory.save(tmp_path)
+    back = Trajectory.load(tmp_path)
+    for name, arr in dome_plan.trajectory.arrays().items():
+        assert np.array_equal(arr, getattr(back, name))
+    with np.load(tmp_path / "trajectory.npz") as f:
+        assert f["q"].dtype == np.float64 and f["waypoint"].dtype == np.int32
+        assert f["extrude"].dtype == np.bool_ and f["model_T"].shape == (4, 4)
+
+
+def test_mesp_plan_command(lines_tp: Toolpath, tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    lines_tp.save(tmp_path)
+    assert main(["plan", str(tmp_path), "--quiet"]) == 0
+    tr = Trajectory.load(tmp_path)
+    assert (tr.waypoint >= 0).sum() == len(lines_tp)
+    rep = read_report(tmp_path)["plan"]
+    assert rep["unreachable"]["count"] == 0
+    assert (tmp_path / "figures" / "plan_joints.png").is_file()
+    assert (tmp_path / "figures" / "plan_alpha.png").is_file()
+    assert (tmp_path / "figures" / "plan_clearance.png").is_file()
+
+
+def test_mesp_plan_user_errors(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
+    assert main(["plan", str(tmp_path / "missing")]) == 2
+    assert main(["plan", str(tmp_path)]) == 2  # no toolpath.npz
+    err = capsys.readouterr().err
+    assert "toolpath.npz" in err and "Traceback" not in err

@@ -1,0 +1,90 @@
+"""Time law: joint limits never exceeded, toolpath speed kept, slow-downs reported."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from planner.cell import CellConfig
+from planner.plan import PlanResult, plan
+from planner.timing import _scan_limit
+from slicer.stages import Toolpath
+
+
+def test_scan_limit_equals_the_sequential_recursion() -> None:
+    rng = np.random.default_rng(0)
+    cap = rng.uniform(0, 10, 200)
+    inc = rng.uniform(0, 1, 199)
+    x = np.empty(200)
+    x[0] = cap[0]
+    for k in range(1, 200):
+        x[k] = min(cap[k], x[k - 1] + inc[k - 1])
+    assert np.allclose(_scan_limit(cap, inc), x)
+
+
+def _limits_hold(result: PlanResult, cell: CellConfig) -> None:
+    tr = result.trajectory
+    vmax = np.radians(cell.robot.max_velocity_deg_s)
+    amax = np.radians(cell.robot.max_acceleration_deg_s2)
+    assert np.all(np.abs(tr.qd) <= vmax * (1 + 1e-9))
+    acc = np.abs(np.diff(tr.qd, axis=0)) / np.diff(tr.t)[:, None]
+    assert np.all(acc <= amax * (1 + 1e-9))
+    assert np.all(np.diff(tr.t) > 0)
+
+
+def test_limits_never_exceeded(dome_plan: PlanResult, lines_plan: PlanResult,
+                               cell: CellConfig) -> None:
+    _limits_hold(dome_plan, cell)
+    _limits_hold(lines_plan, cell)
+
+
+def test_joint_rates_integrate_to_the_positions(dome_plan: PlanResult) -> None:
+    tr = dome_plan.trajectory
+    # trapezoidal integration of the DLS joint rates reproduces the IK positions
+    dq = 0.5 * (tr.qd[1:] + tr.qd[:-1]) * np.diff(tr.t)[:, None]
+    step = np.diff(tr.q, axis=0)
+    scale = np.abs(step).max()
+    assert np.percentile(np.abs(dq - step).max(axis=1), 95) < 0.05 * scale
+
+
+def test_tcp_speed_follows_the_toolpath(dome_plan: PlanResult) -> None:
+    tr = dome_plan.trajectory
+    v = np.linalg.norm(np.diff(tr.tcp, axis=0), axis=1) / np.diff(tr.t)
+    target = dome_plan.samples.speed[:-1]
+    ex = tr.extrude[:-1]
+    ratio = v[ex] / target[ex]
+    assert np.mean(np.abs(ratio - 1.0) < 0.05) > 0.95
+    assert dome_plan.report["speed_ratio"]["within_5pct"] > 0.95
+
+
+def test_slow_joints_force_slower_tcp_and_report_over_deposition(
+    lines_tp: Toolpath, cell: CellConfig
+) -> None:
+    robot = dataclasses.replace(cell.robot, max_velocity_deg_s=(0.5,) * 6,
+                                max_acceleration_deg_s2=(5.0,) * 6)
+    slow = dataclasses.replace(cell, robot=robot)
+    result = plan(lines_tp, slow)
+    _limits_hold(result, slow)
+    od = result.report["over_deposition"]
+    assert od["slowed_steps"] > 10
+    assert od["volume_mm3"] > 0 and od["max_local_factor"] > 1.05
+    assert result.report["speed_ratio"]["p50"] < 0.95
+
+
+def test_null_space_motion_only_spins_the_tool() -> None:
+    from planner import kinematics as kin
+    from planner.timing import _null_vector
+
+    rng = np.random.default_rng(4)
+    q = np.radians([170.0, -90.0, 110.0, -110.0, -90.0, 0.0]) + rng.normal(0, 0.2, (20, 6))
+    tool = np.eye(4)
+    tool[2, 3] = 0.29
+    J = kin.jacobian(q, tool)
+    a = kin.fk(q, tool)[:, :3, 2]
+    n = _null_vector(J, a, np.zeros(len(q)))
+    twist = np.einsum("mij,mj->mi", J, n)
+    assert np.allclose(twist[:, :3], 0.0, atol=1e-10)  # the TCP stays put
+    w = twist[:, 3:]
+    assert np.allclose(np.cross(w, a), 0.0, atol=1e-10)  # it turns about the nozzle axis
+    assert np.all(np.linalg.norm(w, axis=1) > 0)

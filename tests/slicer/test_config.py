@@ -1,0 +1,77 @@
+"""Job configuration: defaults, overrides, and one-line errors naming the key."""
+
+from pathlib import Path
+
+import pytest
+
+from slicer.config import CriticalSelector, JobConfig, load_job
+from slicer.errors import InputError
+
+
+def test_defaults_load_and_validate() -> None:
+    job = load_job()
+    assert isinstance(job, JobConfig)
+    assert job.slicing.layer_height_mm > 0
+    assert job.mesh.edge_length_mm > 0
+    assert job.model.scale_mm == 1.0
+
+
+def test_job_file_overrides_defaults(tmp_path: Path) -> None:
+    path = tmp_path / "job.toml"
+    path.write_text('[slicing]\nlayer_height_mm = 0.8\ncritical = ["top:30"]\n')
+    job = load_job(path)
+    assert job.slicing.layer_height_mm == 0.8
+    assert job.slicing.selectors[0].direction == (0.0, 0.0, 1.0)
+    assert job.mesh == JobConfig().mesh
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("[slicing]\nlayer_hieght_mm = 0.8\n", "unknown key 'job.slicing.layer_hieght_mm'"),
+        ("[slicing]\nlayer_height_mm = 'thin'\n", "must be a number"),
+        ("[slicing]\nlayer_height_mm = -1\n", "layer_height_mm"),
+        ("[model]\nunits = 'furlong'\n", "'job.model.units' is 'furlong'"),
+        ("[slicing\n", "not valid TOML"),
+        ("[slicing]\ncritical = ['sideways']\n", "not understood"),
+    ],
+)
+def test_bad_job_file_is_one_line_input_error(tmp_path: Path, text: str, message: str) -> None:
+    path = tmp_path / "job.toml"
+    path.write_text(text)
+    with pytest.raises(InputError, match=message) as info:
+        load_job(path)
+    assert "\n" not in info.value.one_line()
+
+
+def test_missing_job_file(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="does not exist"):
+        load_job(tmp_path / "nope.toml")
+
+
+@pytest.mark.parametrize(
+    ("text", "direction", "cone"),
+    [
+        ("bottom", (0.0, 0.0, -1.0), 45.0),
+        ("top:30", (0.0, 0.0, 1.0), 30.0),
+        ("normal:2,0,0:10", (1.0, 0.0, 0.0), 10.0),
+    ],
+)
+def test_critical_selector_parse(
+    text: str, direction: tuple[float, float, float], cone: float
+) -> None:
+    sel = CriticalSelector.parse(text)
+    assert sel.direction == direction and sel.cone_deg == cone
+
+
+@pytest.mark.parametrize("text", ["top:95", "normal:0,0,0", "left", "top:x"])
+def test_bad_critical_selector(text: str) -> None:
+    with pytest.raises(InputError):
+        CriticalSelector.parse(text)
+
+
+def test_with_overrides_validates() -> None:
+    job = load_job()
+    assert job.with_overrides(mesh={"edge_length_mm": 2.0}).mesh.edge_length_mm == 2.0
+    with pytest.raises(InputError):
+        job.with_overrides(mesh={"edge_length_mm": -2.0})

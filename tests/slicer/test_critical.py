@@ -1,0 +1,59 @@
+from __future__ import annotations
+
+import numpy as np
+
+from slicer.config import CriticalSelector
+from slicer.critical import select_critical_regions
+from slicer.operators import build_operators
+from slicer.stages import TetMesh
+from tests.slicer.conftest import box_mesh
+
+
+def _sel(*texts: str) -> list[CriticalSelector]:
+    return [CriticalSelector.parse(t) for t in texts]
+
+
+def test_box_bottom_and_top(box: TetMesh) -> None:
+    ops = build_operators(box)
+    sel = select_critical_regions(ops, _sel("bottom", "top:30"))
+    assert len(sel.regions) == 2 and sel.notes == ()
+    bottom, top = sel.regions
+    assert len(bottom.faces) == len(top.faces) == 32  # 4x4 cells, 2 triangles each
+    np.testing.assert_allclose(bottom.normals, [[0, 0, -1]] * 32, atol=1e-12)
+    # Bottom is a start surface: growth = -normal = +z; top is an end surface: growth = +normal.
+    assert bottom.sign == -1.0 and top.sign == 1.0
+    np.testing.assert_allclose(bottom.growth, [[0, 0, 1]] * 32, atol=1e-12)
+    np.testing.assert_allclose(top.growth, [[0, 0, 1]] * 32, atol=1e-12)
+    np.testing.assert_allclose(ops.vertices[bottom.vertices, 2], 0.0)
+    np.testing.assert_allclose(ops.vertices[top.vertices, 2], 8.0)
+    assert len(bottom.vertices) == 25
+    assert bottom.area == 64.0
+
+
+def test_one_selector_two_patches() -> None:
+    a = box_mesh(n=(2, 2, 2), size=(2, 2, 2))
+    b = box_mesh(n=(2, 2, 2), size=(2, 2, 2))
+    verts = np.vstack([a.vertices, b.vertices + np.array([5.0, 0.0, 1.0])])
+    tets = np.vstack([a.tets, b.tets + len(a.vertices)])
+    ops = build_operators(TetMesh(verts, tets))
+    sel = select_critical_regions(ops, _sel("top"))
+    assert len(sel.regions) == 2
+    tops = sorted(float(ops.vertices[r.vertices, 2].mean()) for r in sel.regions)
+    assert tops == [2.0, 3.0]
+    # Patches are disjoint and cover all up-facing faces.
+    faces = np.concatenate([r.faces for r in sel.regions])
+    assert len(np.unique(faces)) == len(faces) == int((ops.boundary.normal[:, 2] > 0.9).sum())
+
+
+def test_tiny_patches_dropped_with_note(box: TetMesh) -> None:
+    ops = build_operators(box)
+    sel = select_critical_regions(ops, _sel("top", "bottom"), min_faces=40)
+    assert sel.regions == ()
+    assert len(sel.notes) == 2 and "fewer than 40" in sel.notes[0]
+
+
+def test_no_match_noted_and_faces_not_reused(box: TetMesh) -> None:
+    ops = build_operators(box)
+    sel = select_critical_regions(ops, _sel("normal:1,1,1:10", "top", "top:60"))
+    assert len(sel.regions) == 1
+    assert any("matched no boundary face" in n for n in sel.notes)

@@ -1,0 +1,96 @@
+"""Stage values: immutability, validation and the save/load round trip."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from slicer.errors import InputError
+from slicer.stages import Field, Layers, TetMesh, Toolpath
+
+
+def _tetmesh() -> TetMesh:
+    vertices = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+    return TetMesh(vertices=vertices, tets=np.array([[0, 1, 2, 3]]))
+
+
+def _toolpath(n: int = 5) -> Toolpath:
+    rng = np.random.default_rng(0)
+    return Toolpath(
+        position=rng.normal(size=(n, 3)),
+        normal=np.tile([0.0, 0.0, 1.0], (n, 1)),
+        layer=np.zeros(n, int),
+        path=np.zeros(n, int),
+        height=np.full(n, 0.6),
+        width=np.full(n, 1.2),
+        speed=np.full(n, 9.0),
+        extrude=np.ones(n, bool),
+        pattern=np.zeros(n, int),
+    )
+
+
+def test_stage_arrays_are_read_only() -> None:
+    mesh = _tetmesh()
+    with pytest.raises(ValueError):
+        mesh.vertices[0, 0] = 5.0
+    with pytest.raises(AttributeError):
+        mesh.vertices = np.zeros((4, 3))  # type: ignore[misc]
+
+
+def test_stage_does_not_alias_caller_arrays() -> None:
+    vertices = np.zeros((4, 3))
+    mesh = TetMesh(vertices=vertices, tets=np.array([[0, 1, 2, 3]], dtype=np.int32))
+    vertices[0, 0] = 7.0
+    assert mesh.vertices[0, 0] == 0.0
+
+
+def test_roundtrip_all_stages(tmp_path: Path) -> None:
+    mesh = _tetmesh()
+    mesh.save(tmp_path)
+    back = TetMesh.load(tmp_path)
+    np.testing.assert_array_equal(back.vertices, mesh.vertices)
+    assert back.tets.dtype == np.int32
+
+    field = Field(g=np.arange(4.0), iso=np.array([0.5, 1.5]))
+    field.save(tmp_path)
+    np.testing.assert_array_equal(Field.load(tmp_path).iso, field.iso)
+
+    layers = Layers(
+        vertices=np.eye(3),
+        faces=np.array([[0, 1, 2]]),
+        face_layer=np.array([0]),
+        vertex_height=np.full(3, 0.6),
+        vertex_direction=np.tile([0.0, 0.0, 1.0], (3, 1)),
+    )
+    layers.save(tmp_path)
+    loaded = Layers.load(tmp_path)
+    assert loaded.layer_count == 1
+    assert loaded.layer(0).faces.shape == (1, 3)
+
+    path = _toolpath()
+    path.save(tmp_path)
+    again = Toolpath.load(tmp_path)
+    assert len(again) == 5 and again.pattern.dtype == np.int8 and again.extrude.dtype == bool
+
+
+def test_inconsistent_stage_is_refused() -> None:
+    with pytest.raises(ValueError, match="outside"):
+        TetMesh(vertices=np.zeros((3, 3)), tets=np.array([[0, 1, 2, 3]]))
+    with pytest.raises(ValueError, match="increase"):
+        Field(g=np.zeros(3), iso=np.array([1.0, 0.5]))
+
+
+def test_missing_or_corrupt_file_is_input_error(tmp_path: Path) -> None:
+    with pytest.raises(InputError, match="does not exist"):
+        TetMesh.load(tmp_path)
+    (tmp_path / "tetmesh.npz").write_text("not a zip")
+    with pytest.raises(InputError, match="not a readable"):
+        TetMesh.load(tmp_path)
+    np.savez(tmp_path / "toolpath.npz", position=np.zeros((2, 3)))
+    with pytest.raises(InputError, match="no array 'normal'"):
+        Toolpath.load(tmp_path)
+
+
+def test_save_is_atomic_and_leaves_no_temp_files(tmp_path: Path) -> None:
+    _tetmesh().save(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["tetmesh.npz"]

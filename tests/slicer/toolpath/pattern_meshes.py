@@ -1,0 +1,78 @@
+"""Tiny layer meshes for the toolpath pattern tests: discs and annuli, flat or lifted."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial import Delaunay
+
+
+def disc(radius: float, h: float, inner: float = 0.0, jitter: float = 0.0, seed: int = 0
+         ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
+    """Flat disc (inner = 0) or annulus in z = 0 with edge length about h (mm).
+
+    Interior points lie on a hexagonal lattice (optionally jittered by ``jitter`` * h), the
+    boundary circles are sampled at spacing h.
+    """
+    rng = np.random.default_rng(seed)
+    rows = np.arange(-radius, radius + h, h * np.sqrt(3) / 2)
+    pts = []
+    for i, y in enumerate(rows):
+        xs = np.arange(-radius, radius + h, h) + (0.5 * h if i % 2 else 0.0)
+        pts.append(np.column_stack([xs, np.full_like(xs, y)]))
+    p = np.concatenate(pts)
+    p = p + jitter * h * rng.uniform(-1, 1, p.shape)
+    r = np.linalg.norm(p, axis=1)
+    p = p[(r < radius - 0.5 * h) & (r > inner + 0.5 * h)]
+    rings = [radius] + ([inner] if inner > 0 else [])
+    for rr in rings:
+        n = max(int(np.ceil(2 * np.pi * rr / h)), 6)
+        a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+        p = np.concatenate([p, rr * np.column_stack([np.cos(a), np.sin(a)])])
+    tri = Delaunay(p).simplices
+    cen = p[tri].mean(axis=1)
+    keep = np.linalg.norm(cen, axis=1) > inner
+    tri = tri[keep]
+    used, inv = np.unique(tri, return_inverse=True)
+    v = np.column_stack([p[used], np.zeros(len(used))])
+    f = inv.reshape(-1, 3).astype(np.int32)
+    # counter-clockwise faces, normal +z
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    flip = np.cross(b - a, c - a)[:, 2] < 0
+    f[flip] = f[flip][:, [0, 2, 1]]
+    return v, f
+
+
+def dome(v: NDArray[np.float64], height: float, radius: float) -> NDArray[np.float64]:
+    """Lift flat vertices onto a smooth bump z = height * (1 - r^2 / radius^2)."""
+    out = v.copy()
+    r2 = (v[:, :2] ** 2).sum(axis=1)
+    out[:, 2] = height * (1.0 - r2 / radius**2)
+    return out
+
+
+def sliver_disc(radius: float, h: float, squeeze: float = 0.97
+                ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
+    """A flat disc where some interior vertices are slid almost onto a neighbour.
+
+    Every moved vertex goes ``squeeze`` of the way along one of its edges, which leaves needle
+    and sliver triangles (angles near 0 and 180 deg) like those of marching tetrahedra while the
+    mesh stays valid (no inverted faces: moves that would invert are undone).
+    """
+    v, f = disc(radius, h)
+    from slicer.toolpath.surface import boundary_vertices
+
+    bnd = boundary_vertices(f, len(v))
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    target = np.full(len(v), -1)
+    target[e[:, 0]] = e[:, 1]
+    moved = (np.arange(len(v)) % 5 == 0) & ~bnd & (target >= 0)
+    # never move two ends of one edge
+    both = moved[e[:, 0]] & moved[e[:, 1]]
+    moved[e[both, 1]] = False
+    out = v.copy()
+    out[moved] = v[moved] + squeeze * (v[target[moved]] - v[moved])
+    a, b, c = out[f[:, 0]], out[f[:, 1]], out[f[:, 2]]
+    bad = np.cross(b - a, c - a)[:, 2] <= 0
+    out[f[bad].ravel()] = v[f[bad].ravel()]
+    return out, f

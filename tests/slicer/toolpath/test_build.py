@@ -1,0 +1,290 @@
+"""Whole-model toolpath on hand-made layer stacks (no tetrahedralisation)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from numpy.typing import NDArray
+from scipy.spatial import Delaunay, cKDTree
+
+from slicer.config import JobConfig
+from slicer.extrusion import load_profile
+from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Layers
+from slicer.toolpath.build import ToolpathResult, compute_toolpath, layer_pattern
+
+PROFILE = load_profile("ecoflex-0030")
+
+
+def disc_mesh(radius: float, h: float, inner: float = 0.0) -> tuple[
+    NDArray[np.float64], NDArray[np.int32]
+]:
+    """Flat disc (or annulus) in z = 0, rings of points about h apart, faces normal +z."""
+    pts = [np.zeros((1, 2))] if inner == 0.0 else []
+    r0 = inner if inner > 0 else h
+    for r in np.arange(r0, radius + 0.5 * h, h):
+        r = min(r, radius)
+        n = max(int(np.ceil(2 * np.pi * r / h)), 6)
+        a = np.linspace(0, 2 * np.pi, n, endpoint=False) + 0.37 * r
+        pts.append(r * np.column_stack([np.cos(a), np.sin(a)]))
+    p = np.concatenate(pts)
+    tri = Delaunay(p).simplices
+    if inner > 0:
+        tri = tri[np.linalg.norm(p[tri].mean(axis=1), axis=1) > inner]
+    used, inv = np.unique(tri, return_inverse=True)
+    v = np.column_stack([p[used], np.zeros(len(used))])
+    f = inv.reshape(-1, 3).astype(np.int32)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    flip = np.cross(b - a, c - a)[:, 2] < 0
+    f[flip] = f[flip][:, [0, 2, 1]]
+    return v, f
+
+
+def disc_stack(n_layers: int, radius: float = 12.0, h: float = 1.0, base_h: float = 0.6,
+               slope: float = 0.15) -> Layers:
+    """Flat discs at z = k * base_h, layer height H = base_h + slope * x / radius."""
+    v, f = disc_mesh(radius, h)
+    vs, fs, fl, hs = [], [], [], []
+    for k in range(n_layers):
+        vv = v.copy()
+        vv[:, 2] = k * base_h
+        vs.append(vv)
+        fs.append(f + k * len(v))
+        fl.append(np.full(len(f), k))
+        hs.append(base_h + slope * v[:, 0] / radius)
+    verts = np.concatenate(vs)
+    return Layers(verts, np.concatenate(fs), np.concatenate(fl), np.concatenate(hs),
+                  np.tile([0.0, 0.0, 1.0], (len(verts), 1)))
+
+
+def cap_stack(n_layers: int, r0: float = 30.0, height: float = 0.6, cone_deg: float = 25.0,
+              h: float = 1.0) -> Layers:
+    """Concentric spherical caps |p| = r0 + k * height (polar angle < cone), growth radial."""
+    v, f = disc_mesh(1.0, h / (r0 * np.radians(cone_deg)))
+    theta = np.linalg.norm(v[:, :2], axis=1) * np.radians(cone_deg)
+    phi = np.arctan2(v[:, 1], v[:, 0])
+    unit = np.column_stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
+                            np.cos(theta)])
+    vs, fs, fl = [], [], []
+    for k in range(n_layers):
+        vs.append(unit * (r0 + k * height))
+        fs.append(f + k * len(v))
+        fl.append(np.full(len(f), k))
+    verts = np.concatenate(vs)
+    return Layers(verts, np.concatenate(fs), np.concatenate(fl),
+                  np.full(len(verts), height), np.tile(unit, (n_layers, 1)))
+
+
+@pytest.fixture(scope="module")
+def discs() -> tuple[Layers, ToolpathResult]:
+    layers = disc_stack(4)
+    return layers, compute_toolpath(layers, JobConfig(), PROFILE, workers=1)
+
+
+@pytest.fixture(scope="module")
+def caps() -> tuple[Layers, ToolpathResult]:
+    layers = cap_stack(2)
+    return layers, compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False,
+                                    workers=1)
+
+
+def test_patterns_alternate() -> None:
+    assert [layer_pattern(i, "contour") for i in range(4)] == [0, 1, 0, 1]
+    assert [layer_pattern(i, "stripe") for i in range(3)] == [1, 0, 1]
+
+
+def test_waypoints_on_flat_layers_with_unit_normals(discs: tuple[Layers, ToolpathResult]) -> None:
+    _, res = discs
+    tp = res.toolpath
+    ext = tp.extrude
+    assert np.all(np.abs(tp.position[ext, 2] - 0.6 * tp.layer[ext]) < 0.01)
+    assert np.allclose(np.linalg.norm(tp.normal, axis=1), 1.0, atol=1e-9)
+    assert np.allclose(tp.normal[ext], [0.0, 0.0, 1.0], atol=1e-9)
+    assert np.all(np.linalg.norm(tp.position[ext, :2], axis=1) <= 12.0 + 1e-6)
+    assert set(np.unique(tp.layer)) == {0, 1, 2, 3}
+    assert np.all(np.diff(tp.layer) >= 0)
+    assert np.all(np.diff(tp.path) >= 0)
+    assert np.all(tp.pattern[tp.layer % 2 == 0] == PATTERN_CONTOUR)
+    assert np.all(tp.pattern[tp.layer % 2 == 1] == PATTERN_STRIPE)
+
+
+def test_width_follows_eq4(discs: tuple[Layers, ToolpathResult]) -> None:
+    tp = discs[1].toolpath
+    assert np.allclose(tp.width, PROFILE.rate_mm3_s / (tp.height * tp.speed), rtol=1e-9)
+    ext = tp.extrude
+    # H on the flat layer is the linear field base_h + slope * x / radius
+    assert np.allclose(tp.height[ext], 0.6 + 0.15 * tp.position[ext, 0] / 12.0, atol=1e-9)
+    assert np.allclose(tp.speed, PROFILE.speed_at(tp.height))
+
+
+def test_volume_matches_required(discs: tuple[Layers, ToolpathResult]) -> None:
+    _, res = discs
+    rep = res.report
+    assert abs(rep["deposited_volume_mm3"] / rep["required_volume_mm3"] - 1.0) < 0.02
+    area = np.pi * 12.0**2
+    # required = integral of H over the layers (H linear in x averages to base_h)
+    assert rep["required_volume_mm3"] == pytest.approx(4 * 0.6 * area, rel=0.02)
+    for stat in res.layer_stats:
+        assert abs(stat["deposited_mm3"] / stat["required_mm3"] - 1.0) < 0.02
+    assert rep["component_volume_error"]["max_abs"] < 0.02
+
+
+def _tangents(pos: NDArray[np.float64], keep: NDArray[np.bool_], path: NDArray[np.int32]
+              ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    d = np.diff(pos, axis=0)
+    ok = keep[1:] & keep[:-1] & (path[1:] == path[:-1])
+    mid = 0.5 * (pos[1:] + pos[:-1])
+    t = d[ok] / np.maximum(np.linalg.norm(d[ok], axis=1, keepdims=True), 1e-12)
+    return mid[ok], t
+
+
+def test_consecutive_layers_cross(discs: tuple[Layers, ToolpathResult]) -> None:
+    tp = discs[1].toolpath
+    for k in range(3):
+        ma, ta = _tangents(tp.position, tp.extrude & (tp.layer == k), tp.path)
+        mb, tb = _tangents(tp.position, tp.extrude & (tp.layer == k + 1), tp.path)
+        _, j = cKDTree(ma[:, :2]).query(mb[:, :2])
+        ang = np.degrees(np.arccos(np.clip(np.abs(np.einsum("ij,ij->i", ta[j], tb)), 0, 1)))
+        assert np.median(ang) >= 60.0, (k, np.median(ang))
+
+
+def test_travel_is_lifted_and_not_extruding(discs: tuple[Layers, ToolpathResult]) -> None:
+    tp = discs[1].toolpath
+    trav = ~tp.extrude
+    assert np.any(trav)  # at least between layers
+    # every travel waypoint is at least one layer height above the layer just printed
+    # (a travel move belongs to the layer it leaves)
+    assert np.all(tp.position[trav, 2] >= 0.6 * tp.layer[trav] + tp.height[trav] - 1e-9)
+    # travel waypoints have their own path ids
+    assert not set(np.unique(tp.path[trav])) & set(np.unique(tp.path[~trav]))
+
+
+def test_one_extrusion_start_per_contour_disc(discs: tuple[Layers, ToolpathResult]) -> None:
+    for stat in discs[1].layer_stats:
+        if stat["pattern"] == "contour":
+            assert stat["extrusion_starts"] == [1]
+    rep = discs[1].report
+    assert rep["paths"] == rep["extrusion_starts"]["total"]
+
+
+def test_report_keys_and_measured_width_error(discs: tuple[Layers, ToolpathResult]) -> None:
+    rep = discs[1].report
+    for key in ("waypoints", "paths", "length_mm", "deposited_volume_mm3", "volume_error",
+                "width_error", "width_error_undeformed", "width_error_poisson_stripe"):
+        assert key in rep
+    for pat in ("contour", "stripe"):
+        we = rep["width_error"][pat]
+        assert we["n"] > 0 and 0 <= we["p50"] <= we["p90"] <= we["p95"]
+    # deformation makes contour spacing follow the variable W much better than direct lines
+    assert rep["width_error"]["contour"]["p90"] < rep["width_error_undeformed"]["contour"]["p90"]
+    assert rep["width_error"]["contour"]["p90"] < 0.2
+    assert rep["width_error_poisson_stripe"]["n"] > 0
+    assert 0.5 <= rep["tau"]["min"] <= rep["tau"]["max"] <= 2.0
+    assert len(rep["per_layer"]) == 4
+    json.dumps(rep)  # the report section is plain JSON
+
+
+def test_curved_caps_on_layer_with_radial_normals(caps: tuple[Layers, ToolpathResult]) -> None:
+    _, res = caps
+    tp = res.toolpath
+    ext = tp.extrude
+    radius = np.linalg.norm(tp.position, axis=1)
+    target = 30.0 + 0.6 * tp.layer
+    # faces are chords of the sphere: distance to the *mesh* is what counts; the sagitta
+    # of a 1 mm edge on r = 30 mm is 0.004 mm, so the sphere is within 0.01 mm too
+    assert np.all(np.abs(radius[ext] - target[ext]) < 0.01)
+    radial = tp.position / radius[:, None]
+    assert np.all(np.einsum("ij,ij->i", tp.normal[ext], radial[ext]) > 0.99)
+    trav = ~ext
+    assert np.all(radius[trav] >= 30.0 + 0.6 * tp.layer[trav] + 0.6 - 1e-6)
+    assert abs(res.report["layer_volume_error"]) < 0.02
+
+
+def test_parallel_equals_serial() -> None:
+    layers = disc_stack(4, radius=8.0)
+    cfg = JobConfig()
+    serial = compute_toolpath(layers, cfg, PROFILE, measure_baselines=False, workers=1)
+    parallel = compute_toolpath(layers, cfg, PROFILE, measure_baselines=False, workers=2)
+    for name, arr in serial.toolpath.arrays().items():
+        assert np.array_equal(arr, parallel.toolpath.arrays()[name]), name
+
+
+def test_closed_component_is_skipped_with_reason() -> None:
+    """A layer component without boundary (a closed tetrahedron surface) cannot carry
+    boundary-conformal lines: it is reported, the rest of the layer is still printed."""
+    disc = disc_stack(1, radius=6.0)
+    tet_v = np.array([[20.0, 0, 0], [22, 0, 0], [20, 2, 0], [20, 0, 2]])
+    tet_f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]) + len(disc.vertices)
+    layers = Layers(
+        np.concatenate([disc.vertices, tet_v]),
+        np.concatenate([disc.faces, tet_f]),
+        np.zeros(len(disc.faces) + 4, np.int32),
+        np.concatenate([disc.vertex_height, np.full(4, 0.6)]),
+        np.concatenate([disc.vertex_direction, np.tile([0, 0, 1.0], (4, 1))]),
+    )
+    res = compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False, workers=1)
+    assert res.status == "failed-components"
+    assert res.report["failed_components"]["count"] == 1
+    assert "boundary" in res.report["failed_components"]["reasons"][0]
+    tp = res.toolpath
+    assert np.all(np.linalg.norm(tp.position[tp.extrude, :2], axis=1) <= 6.0 + 1e-6)
+    assert res.report["extrusion_starts"]["total"] >= 1
+
+
+def test_heights_outside_profile_are_clamped() -> None:
+    layers = disc_stack(1, radius=6.0, base_h=0.6, slope=0.55)  # H from 0.05 to 1.15 mm
+    res = compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False, workers=1)
+    tp = res.toolpath
+    lo, hi = PROFILE.layer_height_range
+    assert np.all((tp.height >= lo - 1e-12) & (tp.height <= hi + 1e-12))
+    assert np.all(np.isfinite(tp.width)) and tp.width.max() < 10.0
+    assert np.allclose(tp.width, PROFILE.rate_mm3_s / (tp.height * tp.speed))
+    assert res.report["height_out_of_profile_fraction"] > 0
+
+
+def test_stripes_stop_half_a_width_inside(discs: tuple[Layers, ToolpathResult]) -> None:
+    tp = discs[1].toolpath
+    sel = tp.extrude & (tp.pattern == PATTERN_STRIPE)
+    gap = 12.0 - np.linalg.norm(tp.position[sel, :2], axis=1)
+    # the outermost material band (W / 2 each side of the line) ends at the boundary; a
+    # short stripe is cut back by at most a quarter of its length per end
+    ratio = gap / tp.width[sel]
+    assert np.percentile(ratio, 2) >= 0.35
+    assert ratio.min() > 0.05
+    assert ratio.min() < 0.6
+
+
+def test_thin_band_gets_a_centre_line() -> None:
+    """An annulus about one width wide (W = 4.5 mm at H = 1 mm) cannot take stripes (they
+    vanish when cut back by W / 2) nor spaced contours: one loop along its middle."""
+    v, f = disc_mesh(14.0, 0.5, inner=10.0)
+    layers = Layers(v, f, np.zeros(len(f), np.int32), np.full(len(v), 1.0),
+                    np.tile([0.0, 0.0, 1.0], (len(v), 1)))
+    cfg = JobConfig().with_overrides(toolpath={"first_pattern": "stripe"})
+    res = compute_toolpath(layers, cfg, PROFILE, measure_baselines=False, workers=1)
+    assert res.report["thin_fallback"]["centre-line"] == 1
+    tp = res.toolpath
+    r = np.linalg.norm(tp.position[tp.extrude, :2], axis=1)
+    assert np.allclose(r, 12.0, atol=0.3)
+    assert np.all(tp.pattern == PATTERN_CONTOUR)
+    assert res.report["extrusion_starts"]["total"] == 1
+    # volume: one 4.5 mm wide loop on a 4 mm wide band
+    assert abs(res.report["layer_volume_error"]) < 0.2
+
+
+def test_variable_height_on_a_curved_layer_is_deformed() -> None:
+    """A spherical cap whose layer height grows along x: the width-driven deformation runs,
+    waypoints stay on the cap, and the contour spacing follows W far better than lines
+    computed directly on the cap."""
+    base = cap_stack(1, r0=30.0, cone_deg=30.0)
+    height = 0.5 + 0.25 * (base.vertices[:, 0] / 15.0 + 1.0)  # 0.5 .. 1.0 mm
+    layers = Layers(base.vertices, base.faces, base.face_layer, height, base.vertex_direction)
+    res = compute_toolpath(layers, JobConfig(), PROFILE, workers=1)
+    tp = res.toolpath
+    assert res.report["deformation_status"].get("skipped", 0) == 0
+    ext = tp.extrude
+    assert np.all(np.abs(np.linalg.norm(tp.position[ext], axis=1) - 30.0) < 0.01)
+    we, wu = res.report["width_error"]["contour"], res.report["width_error_undeformed"]["contour"]
+    assert we["p90"] < 0.5 * wu["p90"]
+    assert abs(res.report["layer_volume_error"]) < 0.02

@@ -1,0 +1,80 @@
+"""Measured spacing between toolpath lines and the width-error summary."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from slicer.toolpath import width_error
+
+
+def _parallel(n_lines: int, gap: float, n_pts: int = 50) -> tuple[np.ndarray, np.ndarray]:
+    x = np.linspace(0.0, 20.0, n_pts)
+    pts = np.concatenate([np.column_stack([x, np.full(n_pts, k * gap), np.zeros(n_pts)])
+                          for k in range(n_lines)])
+    return pts, np.repeat(np.arange(n_lines), n_pts).astype(np.int32)
+
+
+def test_parallel_lines_measure_their_gap() -> None:
+    pts, line = _parallel(5, 1.3)
+    s = width_error.line_spacing(pts, line)
+    assert np.allclose(s, 1.3)
+    err = width_error.width_error(s, 1.0)
+    assert err.p50 == pytest.approx(0.3) and err.p95 == pytest.approx(0.3)
+
+
+def test_sparse_samples_measure_distance_to_segments() -> None:
+    # neighbour sampled every 2 mm with a half-step offset: the segment distance is still exact
+    pts, line = _parallel(2, 1.0, n_pts=11)
+    pts[line == 1, 0] += 1.0
+    s = width_error.line_spacing(pts, line)
+    inner = (pts[:, 0] > 1.5) & (pts[:, 0] < 19.5)
+    assert np.allclose(s[inner], 1.0)
+
+
+def test_folded_line_is_its_own_neighbour() -> None:
+    # a hairpin: one polyline going out along y = 0 and back along y = 0.8
+    x = np.linspace(0.0, 20.0, 81)
+    turn = 0.4 * np.array([[np.sin(a), 1.0 - np.cos(a), 0.0] for a in np.linspace(0, np.pi, 9)])
+    pts = np.concatenate([np.column_stack([x, 0 * x, 0 * x]), turn[1:-1] + np.array([20.0, 0, 0]),
+                          np.column_stack([x[::-1], 0 * x + 0.8, 0 * x])])
+    line = np.zeros(len(pts), dtype=np.int32)
+    s = width_error.line_spacing(pts, line)
+    straight = (pts[:, 0] < 18.0)
+    assert np.allclose(s[straight], 0.8)
+
+
+def test_normals_remove_the_out_of_plane_offset() -> None:
+    pts, line = _parallel(2, 1.0)
+    pts[line == 1, 2] += 0.5
+    normals = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    assert np.allclose(width_error.line_spacing(pts, line, normals=normals), 1.0)
+    assert np.allclose(width_error.line_spacing(pts, line), np.hypot(1.0, 0.5))
+
+
+def test_single_line_has_no_spacing() -> None:
+    pts, line = _parallel(1, 1.0)
+    s = width_error.line_spacing(pts, line)
+    assert np.isnan(s).all()
+    assert np.isnan(width_error.width_error(s, 1.0).p50)
+
+
+def test_closed_loops_measure_across_their_closing_segment() -> None:
+    # two concentric squares sampled only at their corners: the measured gap must use the
+    # segments, including the one closing each loop
+    sq = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]])
+    mids = 0.5 * (sq + np.roll(sq, -1, axis=0))
+    outer = 3.0 * sq
+    pts = np.concatenate([mids, outer])
+    line = np.repeat([0, 1], 4).astype(np.int32)
+    s = width_error.line_spacing(pts, line, closed=np.array([True, True]))
+    assert np.allclose(s[:4], 2.0)  # edge midpoints of the inner square to the outer sides
+    open_s = width_error.line_spacing(pts, line, closed=np.array([True, False]))
+    assert open_s[3] > 2.0  # without the closing side the nearest outer segment is farther
+
+
+def test_densely_sampled_lines_still_find_their_neighbour() -> None:
+    # 0.02 mm sampling: the 24 nearest samples all lie on the point's own line
+    pts, line = _parallel(3, 1.0, n_pts=1001)
+    s = width_error.line_spacing(pts, line, k=24)
+    assert np.allclose(s, 1.0)
