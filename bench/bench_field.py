@@ -8,10 +8,12 @@ Usage:
               tetmesh .npz (EDGE_MM is then ignored)
     SELECTOR  critical selectors (default: top:45)
 
-Example (about 250k tets): .venv/bin/python bench/bench_field.py examples/socket.stl 2.45
+Example: .venv/bin/python bench/bench_field.py examples/socket.stl 2.7   (206,817 tets;
+2.5 mm gives 408,362 tets; fTetWild takes 10-15 min CPU for these)
 
-Prints wall-clock and CPU seconds per stage (CPU = wall on an idle machine: the field code runs
-single-threaded), the peak RSS, and the initial/final layer-height statistics.
+Prints wall-clock and CPU seconds (the field code runs one thread, so on an idle machine wall
+should be close to CPU; on a loaded one it is not), the peak RSS, and the initial/final
+layer-height statistics.
 """
 
 from __future__ import annotations

@@ -6,11 +6,26 @@ pilot run (tet count ~ edge^-3), so every setting is timed at about the same tet
 Reported per run: wall and CPU time of fTetWild, peak memory, tets, mean edge, min dihedral
 angle, fraction of tets with a dihedral angle under 10 deg, mean and worst radius ratio,
 volume error against the surface.
-CPU time is the steadier number on a shared machine.
 
-    .venv/bin/python bench/bench_tetwild.py                       # socket + aorta, all settings
+    .venv/bin/python bench/bench_tetwild.py           # socket + aorta: defaults vs recommended
     .venv/bin/python bench/bench_tetwild.py --models socket --settings defaults fast
     .venv/bin/python bench/bench_tetwild.py --edge socket=3.0     # skip the pilot run
+
+Findings (2026-11-22, 2 shared cores, load average 4-10, so CPU seconds are the numbers to
+compare; wall times were 1.5-4x longer):
+
+- ``coarsen = true`` is the main cost: socket at edge 6.64 mm, 1 thread, CPU s / tets /
+  worst radius ratio: defaults 69.9 / 15.0 k / 0.087; no-coarsen 30.0-32.3 / 22.3 k / 0.41-0.44.
+- At ~250 k tets the 80 optimisation passes dominate: socket, edge 2.95 mm, all cores:
+  no-coarsen (80 passes, stop 10) > 580 s CPU, not finished after 18 min wall;
+  no-coarsen-fast (10 passes, stop 20) 153 s CPU, 227 k tets, 1.24 GB, mean edge 3.05 mm,
+  min dihedral 3.8 deg, slivers (< 10 deg) 0.004 %, mean/worst radius ratio 0.83/0.026,
+  volume error -0.08 %. Graded (edge 3.27 mm, 185 k tets): 10 passes 176 s, 80 passes 233 s.
+- The outside sizing field (``grading``) gave no consistent gain (fTetWild applies it only
+  after its first passes); a steep one (1.0) makes slivers.
+- Aorta (thin wall, large surface) at edge 1.37 mm (~250 k tets) did not finish in 900 s wall.
+- fTetWild is not deterministic across thread counts; the single worst tet varies a lot
+  between runs, the sliver fraction and mean quality much less.
 """
 
 from __future__ import annotations
@@ -119,7 +134,9 @@ def edge_for(model: str, setting: str, target: int, timeout: float, threads: int
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--models", nargs="+", default=["socket", "aorta"])
-    parser.add_argument("--settings", nargs="+", default=list(SETTINGS), choices=list(SETTINGS))
+    parser.add_argument(
+        "--settings", nargs="+", default=["defaults", "no-coarsen-fast"], choices=list(SETTINGS)
+    )
     parser.add_argument("--tets", type=int, default=250_000, help="target tet count")
     parser.add_argument("--edge", action="append", default=[], help="MODEL=MM, skip the pilot")
     parser.add_argument("--timeout", type=float, default=900.0, help="per run, s")

@@ -80,9 +80,9 @@ class ModelConfig:
 class MeshConfig:
     edge_length_mm: float = 1.2
     epsilon: float = 2e-3
-    stop_energy: float = 10.0
-    optimize_iterations: int = 80
-    coarsen: bool = True
+    stop_energy: float = 20.0
+    optimize_iterations: int = 10
+    coarsen: bool = False
 
     def __post_init__(self) -> None:
         if not 0.05 <= self.edge_length_mm <= 100.0:

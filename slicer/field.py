@@ -62,6 +62,7 @@ from slicer.tolerance import tol
 
 ALIGN_WEIGHT = 1.0  # w_l; config.smoothness_weight is w_h relative to it
 NORMALISE_V = True
+INITIAL_FIELD = "scalar"  # G0: "scalar" harmonic (Laplace, regions fixed) or "vector" (eq. 6)
 HARMONIC_REGULARISATION = 1e-8  # tiny mass term keeping the pure-smoothness system SPD
 # Relative residuals of the iterative solves. The iteration is a fixed point that corrects
 # itself and v is renormalised after each solve: on the socket example (207k tets) 1e-6 / 1e-5
@@ -243,6 +244,7 @@ class FieldResult:
     regions: CriticalSelection
     constrained: np.ndarray
     operators: TetOperators = field(repr=False)
+    height_start: HeightStats | None = None
 
     def report(self) -> dict[str, object]:
         """The field's part of report.json's "slicing" section (mm, s; JSON-ready)."""
@@ -254,6 +256,8 @@ class FieldResult:
             "height_cv": self.height.cv,
             "height_std_initial_mm": self.height_initial.std,
             "height_initial_mm": self.height_initial.as_dict(),
+            "height_std_start_mm": (self.height_start.std if self.height_start is not None
+                                    else self.height_initial.std),
             "o_align": list(self.trace.o_align),
             "height_std_per_iteration_mm": list(self.trace.height_std),
             "field_timing_s": dict(self.timings),
@@ -338,6 +342,70 @@ class _Poisson:
         diff = self.ops.gradient(g) - v
         o_align = float((self.ops.volume * np.einsum("ij,ij->i", diff, diff)).sum())
         return g, o_align, status
+
+
+def _harmonic_anchors(ops: TetOperators, selection: CriticalSelection,
+                      labels: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """Dirichlet data of the scalar harmonic G0: (unknown indices, values), both (k,).
+
+    Each critical region's (collapsed) unknown gets the region's area-weighted mean height z.
+    When that leaves fewer than two distinct values (one region, or none) the field would be
+    constant, so the planar default completes it: boundary vertices within half an edge of the
+    lowest z (when no region is a start surface) and of the highest z (when none is an end
+    surface) get g = z, i.e. layers start flat on the build plate / end flat at the top.
+    """
+    idx: list[np.ndarray] = []
+    val: list[np.ndarray] = []
+    for r in selection.regions:
+        area = ops.boundary.area[r.faces]
+        zc = ops.vertices[ops.boundary.faces[r.faces], 2].mean(axis=1)
+        idx.append(labels[r.vertices[:1]])
+        val.append(np.array([float((zc * area).sum() / max(float(area.sum()), tol.zero))]))
+    values = np.concatenate(val) if val else np.zeros(0)
+    if len(values) == 0 or np.ptp(values) <= tol.zero * max(1.0, float(np.abs(values).max())):
+        z = ops.vertices[:, 2]
+        on_boundary = np.zeros(ops.n_vertices, dtype=bool)
+        on_boundary[ops.boundary.faces.ravel()] = True
+        edge = float(np.linalg.norm(ops.vertices[ops.tets[:, 1]] - ops.vertices[ops.tets[:, 0]],
+                                    axis=1).mean())
+        signs = {r.sign for r in selection.regions}
+        if -1.0 not in signs:
+            base = np.flatnonzero(on_boundary & (z <= z.min() + 0.5 * edge))
+            idx.append(labels[base])
+            values = np.concatenate([values, z[base]])
+        if 1.0 not in signs:
+            top = np.flatnonzero(on_boundary & (z >= z.max() - 0.5 * edge))
+            idx.append(labels[top])
+            values = np.concatenate([values, z[top]])
+    unknowns = np.concatenate(idx) if idx else np.zeros(0, dtype=np.int64)
+    # A vertex may be picked twice (an anchor on a region): keep its first value (the region's).
+    unknowns, first = np.unique(unknowns, return_index=True)
+    return unknowns, values[first]
+
+
+class _ScalarHarmonic:
+    """G0 of the harmonic constraint: Laplace with g fixed on the anchors, set up once."""
+
+    def __init__(self, poisson: _Poisson, anchors: np.ndarray, values: np.ndarray) -> None:
+        self.poisson = poisson
+        lap = sp.csr_matrix(poisson.collapse.T @ poisson.ops.laplacian @ poisson.collapse)
+        self.fixed = anchors
+        self.values = values
+        self.free = np.setdiff1d(np.arange(poisson.count), anchors)
+        self.coupling = sp.csr_matrix(lap[self.free][:, anchors])
+        self.solver = SPDSolver(lap[self.free][:, self.free], method="auto",
+                                rtol=POISSON_RTOL)
+
+    def solve(self) -> tuple[np.ndarray, str]:
+        """g (V,) with min 0 and the solver status."""
+        x, status = self.solver.solve(-(self.coupling @ self.values))
+        if status.startswith("failed"):
+            return np.full(self.poisson.ops.n_vertices, np.nan), status
+        u = np.zeros(self.poisson.count)
+        u[self.fixed] = self.values
+        u[self.free] = x
+        g = u[self.poisson.labels]
+        return g - g.min(), status
 
 
 def _normalised(vec: np.ndarray, fallback: np.ndarray) -> np.ndarray:
@@ -469,11 +537,19 @@ def _compute_field(
     v = fixed.copy()
     vf, st_h = harmonic.solve(-w_h * coupling)
     v[free] = vf
-    g0, _, st_p = poisson.solve(v)
+    g_start, _, st_p = poisson.solve(v)
+    st_s = "ok"
+    if INITIAL_FIELD == "scalar":
+        scalar = _ScalarHarmonic(poisson, *_harmonic_anchors(ops, selection, labels, count))
+        g0, st_s = scalar.solve()
+        if scalar.solver.status != "ok":
+            notes.append(f"scalar harmonic solver: {scalar.solver.status}")
+    else:
+        g0 = g_start
     timings["initial"] = time.perf_counter() - t
     prog.end("initial field", timings["initial"])
-    failed = next((s for s in (st_h, st_p) if s.startswith("failed")), "")
-    if failed or not np.all(np.isfinite(g0)):
+    failed = next((s for s in (st_h, st_p, st_s) if s.startswith("failed")), "")
+    if failed or not np.all(np.isfinite(g0)) or not np.all(np.isfinite(g_start)):
         nan = np.full(ops.n_vertices, np.nan)
         hs = HeightStats(*(float("nan"),) * 6)
         timings["total"] = time.perf_counter() - t_start
@@ -486,11 +562,13 @@ def _compute_field(
                            operators=ops)
     grad0 = ops.gradient(g0)
     hs0 = stats_of_gradient(grad0, vol, target_h)
+    grad_start = ops.gradient(g_start)
+    hs_start = stats_of_gradient(grad_start, vol, target_h)
 
     # --- steps 2 and 3, iterated ------------------------------------------------------------
     prog.start("field iterations")
     t = time.perf_counter()
-    g, grad = g0, grad0
+    g, grad = g_start, grad_start
     o_trace: list[float] = []
     std_trace = [hs0.std]
     status = "no_iterations" if config.max_iterations == 0 else "max_iterations"
@@ -538,4 +616,5 @@ def _compute_field(
                        status=status, iterations=iterations,
                        trace=FieldTrace(tuple(o_trace), tuple(std_trace)), timings=timings,
                        notes=tuple(notes),
-                       regions=selection, constrained=constrained, operators=ops)
+                       regions=selection, constrained=constrained, operators=ops,
+                       height_start=hs_start)

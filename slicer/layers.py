@@ -116,6 +116,46 @@ def _unique_edges(tets: np.ndarray, n_vertices: int) -> _Edges:
     return _Edges(ends=pairs[first], of_tet=inverse.reshape(-1, 6).astype(np.int64))
 
 
+# A crossing this close (as a fraction of its edge) to an edge end is snapped onto that mesh
+# vertex: crossings of several edges at one vertex become one layer vertex, and the
+# near-zero-length edges and needle triangles they would form (which break the intrinsic
+# Delaunay Laplacian of the toolpath stage) are never made.
+SNAP_FRACTION = 1e-3
+
+
+def _weld_crossings(
+    edge_ids: np.ndarray, edges: _Edges, g: np.ndarray, x: np.ndarray, level: float,
+    tet_of_tri: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Layer vertices of one iso-level: one per crossed tet edge, snapped to near mesh vertices.
+
+    Args:
+        edge_ids: (m, 3) int, crossed tet-edge ids of each triangle.
+        edges: the mesh's unique edges.
+        g: (V,) float64, the field; x: (V, 3) float64, mm, the tet vertices.
+        level: the iso-value.
+        tet_of_tri: (m,) int, tet of each triangle.
+
+    Returns:
+        faces (k, 3) int64 into verts (n, 3) float64 mm, and the tets (k,) of the kept faces;
+        triangles collapsed by snapping are dropped.
+    """
+    used, inverse = np.unique(edge_ids, return_inverse=True)
+    a, b = edges.ends[used, 0], edges.ends[used, 1]
+    t = (level - g[a]) / (g[b] - g[a])
+    # Key: the edge, or the mesh vertex the crossing snaps to (negative keys).
+    key = used.astype(np.int64)
+    at_a, at_b = t < SNAP_FRACTION, t > 1.0 - SNAP_FRACTION
+    key = np.where(at_a, -1 - a, np.where(at_b, -1 - b, key))
+    t = np.where(at_a, 0.0, np.where(at_b, 1.0, t))
+    _, first, welded = np.unique(key, return_index=True, return_inverse=True)
+    verts = x[a[first]] + t[first, None] * (x[b[first]] - x[a[first]])
+    faces = welded[inverse.reshape(-1, 3)]
+    f0, f1, f2 = faces.T
+    keep = (f0 != f1) & (f1 != f2) & (f0 != f2)
+    return faces[keep], verts, tet_of_tri[keep]
+
+
 def iso_surfaces(mesh: TetOperators | TetMesh, field: Field,
                  progress: Progress | None = None) -> Layers:
     """Marching-tetrahedra extraction of every iso-surface of ``field`` on a tet mesh.
@@ -173,11 +213,7 @@ def iso_surfaces(mesh: TetOperators | TetMesh, field: Field,
         tet_of_tri = np.broadcast_to(cut[:, None], valid.shape)[valid]
         local = tri_local[valid]  # (m, 3)
         edge_ids = np.take_along_axis(edges.of_tet[tet_of_tri], local, axis=1)
-        used, inverse = np.unique(edge_ids, return_inverse=True)
-        faces = inverse.reshape(-1, 3)
-        a, b = edges.ends[used, 0], edges.ends[used, 1]
-        t = (c - g[a]) / (g[b] - g[a])
-        verts = x[a] + t[:, None] * (x[b] - x[a])
+        faces, verts, tet_of_tri = _weld_crossings(edge_ids, edges, g, x, c, tet_of_tri)
         # Orient along the growth direction (the cut tet's gradient).
         p = verts[faces]
         normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
@@ -188,7 +224,7 @@ def iso_surfaces(mesh: TetOperators | TetMesh, field: Field,
         area = 0.5 * np.linalg.norm(normal, axis=1)
         area = area + 1e-9 * float(area.mean()) + tol.zero
         corner = faces.ravel()
-        nv = len(used)
+        nv = len(verts)
         wsum = np.bincount(corner, weights=np.repeat(area, 3), minlength=nv)
         weighted = area[:, None] * grad[tet_of_tri]
         mean_grad = np.column_stack([

@@ -132,8 +132,9 @@ def _slice(
     extraction.layers.save(out_dir)
     export_layers_ply(extraction.layers, out_dir / "layers_ply")
 
-    initial = field_mod.height_stats(tetmesh, result.g0, job.slicing.layer_height_mm)
-    final = field_mod.height_stats(tetmesh, result.g, job.slicing.layer_height_mm)
+    # Per-tet heights for the histogram; the operators are reused, not rebuilt.
+    initial = field_mod.height_stats(result.operators, result.g0, job.slicing.layer_height_mm)
+    final = field_mod.height_stats(result.operators, result.g, job.slicing.layer_height_mm)
     fig_dir = out_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
     figures.height_histogram(

@@ -51,9 +51,7 @@ class StageTimer:
         """Time the body as stage ``name`` (accumulates if run twice)."""
         self.progress.start(name)
         start = time.perf_counter()
-        try:
-            yield
-        finally:
-            elapsed = time.perf_counter() - start
-            self.seconds[name] = self.seconds.get(name, 0.0) + elapsed
-            self.progress.end(name, elapsed)
+        yield  # a stage that raises is neither timed nor reported as done
+        elapsed = time.perf_counter() - start
+        self.seconds[name] = self.seconds.get(name, 0.0) + elapsed
+        self.progress.end(name, elapsed)

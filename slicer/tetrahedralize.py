@@ -12,7 +12,9 @@ so it is off by default and kept for experiments (``bench/bench_tetwild.py``).
 
 from __future__ import annotations
 
+import contextlib
 import os
+import tempfile
 import time
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
@@ -262,20 +264,23 @@ def tetrahedralize(
     used = threads if threads > 0 else os.cpu_count() or 1
     progress.update(0.0, f"fTetWild, target edge {edge:g} mm, {used} threads")
     start = time.perf_counter()
+    # fTetWild drops debug files (__tracked_surface.stl, ...) into the working directory;
+    # run it in a scratch directory so they never land in the user's (or a job) directory.
     try:
-        vertices, tets = pytetwild.tetrahedralize(
-            # Writable copies: the extension refuses read-only arrays.
-            np.array(surface.vertices, dtype=np.float64, order="C"),
-            np.array(surface.faces, dtype=np.int32, order="C"),
-            edge_length_abs=edge,
-            epsilon=config.epsilon,
-            stop_energy=config.stop_energy,
-            coarsen=config.coarsen,
-            num_threads=threads,
-            num_opt_iter=config.optimize_iterations,
-            quiet=True,
-            **kwargs,
-        )
+        with tempfile.TemporaryDirectory(prefix="ftetwild-") as scratch, contextlib.chdir(scratch):
+            vertices, tets = pytetwild.tetrahedralize(
+                # Writable copies: the extension refuses read-only arrays.
+                np.array(surface.vertices, dtype=np.float64, order="C"),
+                np.array(surface.faces, dtype=np.int32, order="C"),
+                edge_length_abs=edge,
+                epsilon=config.epsilon,
+                stop_energy=config.stop_energy,
+                coarsen=config.coarsen,
+                num_threads=threads,
+                num_opt_iter=config.optimize_iterations,
+                quiet=True,
+                **kwargs,
+            )
     except Exception as exc:  # the C++ extension raises RuntimeError/ValueError variants
         raise InputError(
             f"fTetWild could not mesh {surface.source.name} ({type(exc).__name__}: {exc})",

@@ -175,9 +175,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--tau", type=float, default=0.2, help="flow time constant, s")
     ap.add_argument("--gain", type=float, default=1.0, help="hidden true/nominal rate ratio")
     ap.add_argument("--watchdog", type=float, default=0.5, help="host watchdog, s (0 = off)")
+    ap.add_argument("--time-scale", type=float, default=1.0,
+                    help="the flow and totaliser run this many times faster than real time "
+                         "(the simulated cell's clock, shared with the robot twin)")
     args = ap.parse_args(argv)
     logging.getLogger("pymodbus").setLevel(logging.ERROR)
-    emu = ModbusEmulator(PlantParams(tau_s=args.tau, gain=args.gain, watchdog_s=args.watchdog),
+    emu = ModbusEmulator(PlantParams(tau_s=args.tau, gain=args.gain, watchdog_s=args.watchdog,
+                                     time_scale=args.time_scale),
                          host=args.host, port=args.port)
 
     async def run() -> None:

@@ -23,21 +23,27 @@ class PlantParams:
         tau_s: s, time constant of the first-order flow response.
         gain: true delivered volume / nominal volume (hidden from the host).
         max_rate: mm^3/s, set-points are clamped to [0, max_rate].
-        watchdog_s: s, host heartbeat timeout while running (0 = off).
+        watchdog_s: s, host heartbeat timeout while running (0 = off), wall-clock.
+        time_scale: the flow and the totaliser run this many times faster than the wall clock
+            (the simulated cell's clock, shared with the robot twin; 1 = real time). The
+            watchdog supervises the host link, so it stays on the wall clock.
     """
 
     tau_s: float = 0.2
     gain: float = 1.0
     max_rate: float = 50.0
     watchdog_s: float = 0.5
+    time_scale: float = 1.0
 
     def __post_init__(self) -> None:
-        if not (self.tau_s > 0 and self.gain > 0 and self.max_rate > 0 and self.watchdog_s >= 0):
-            raise ValueError("tau_s, gain, max_rate must be > 0 and watchdog_s >= 0")
+        if not (self.tau_s > 0 and self.gain > 0 and self.max_rate > 0 and self.watchdog_s >= 0
+                and self.time_scale > 0):
+            raise ValueError("tau_s, gain, max_rate, time_scale must be > 0 and watchdog_s >= 0")
 
 
 class ExtruderPlant:
-    """A thread-safe extruder model advanced by ``step(now)`` (``now`` in s, monotonic)."""
+    """A thread-safe extruder model advanced by ``step(now)`` (``now`` in s, monotonic wall
+    clock; the flow advances ``time_scale`` times as fast)."""
 
     def __init__(self, params: PlantParams, now: float) -> None:
         self.params = params
@@ -58,7 +64,7 @@ class ExtruderPlant:
     def step(self, now: float) -> None:
         """Advance the flow and the totaliser to ``now`` (exact for a piecewise constant input)."""
         with self._lock:
-            dt = max(0.0, now - self._t)
+            dt = max(0.0, now - self._t) * self.params.time_scale  # simulated seconds
             self._t = now
             self.cycles = (self.cycles + 1) & 0xFFFF
             if self.running and self.watchdog_s > 0 and now - self._host_hb_t > self.watchdog_s:

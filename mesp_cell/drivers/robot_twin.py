@@ -51,6 +51,7 @@ class KinematicTwin:
         self._lock = threading.Lock()
         self.stop_times: list[float] = []  # time.time() of every servo_stop/stop_j
         self.commands = 0
+        self._due = 0.0  # perf_counter s, end of the current period of a fast twin
 
     # -- link ------------------------------------------------------------------------------
     def connect(self) -> None:
@@ -83,11 +84,30 @@ class KinematicTwin:
         """The twin dies with its process, so there is nothing to stop on a missed kick."""
 
     # -- timing ----------------------------------------------------------------------------
+    #: A period shorter than this (a fast twin) is not slept precisely: the loop runs ahead on
+    #: an absolute schedule and sleeps only once it is this far ahead, releasing the GIL and
+    #: the CPU instead of spinning (at 40x a period is 50 us, below the spin threshold, and a
+    #: spinning servo thread starved the node's bus callbacks and the other processes).
+    BATCH_S = 0.001
+    #: Behind the schedule by more than this (the process was not scheduled), the twin does
+    #: not race to catch up: simulated time pauses instead.
+    CATCH_UP_S = 0.02
+
     def init_period(self) -> float:
         return time.perf_counter()
 
     def wait_period(self, t_start: float) -> None:
-        precise_sleep_until(t_start + self.servo.dt / self.servo.time_scale)
+        period = self.servo.dt / self.servo.time_scale
+        if period >= self.BATCH_S:  # real time (or nearly): a precise period for low jitter
+            precise_sleep_until(t_start + period)
+            return
+        now = time.perf_counter()
+        due = self._due + period
+        if not now - self.CATCH_UP_S <= due <= now + self.BATCH_S + period:
+            due = t_start + period  # a new motion, or too far behind
+        self._due = due
+        if due - now > self.BATCH_S:
+            time.sleep(due - now)
 
     # -- motion ----------------------------------------------------------------------------
     def _step(self, target: np.ndarray, dt: float) -> None:

@@ -2,8 +2,8 @@
 
 Commands (``extruder/cmd``): ``start`` (args ``rate`` mm^3/s), ``set_rate``, ``stop``,
 ``reset`` (all latched faults), ``clear`` (latched faults except an e-stop), ``estop``.
-A poll loop at ``state_hz`` feeds the controller watchdog, reads the
-controller and publishes ``ExtruderState``. Interlocks: the motor stops when the robot or the
+A poll loop at ``state_hz`` reads the controller and publishes ``ExtruderState``, and feeds
+the controller watchdog at ``heartbeat_hz``. Interlocks: the motor stops when the robot or the
 supervisor process disappears or an e-stop arrives; a link failure (after the driver's retries)
 is published as ``FAULT_LINK`` and the motor is commanded off as soon as the link returns.
 """
@@ -44,7 +44,8 @@ def make_extruder(params: dict[str, Any]) -> ExtruderDriver:
 
 class ExtruderNode(LifecycleNode):
     """See the module docstring. Parameters: driver, host, port (or url), retries, timeout_s,
-    retry_delay_s, watchdog_ms, state_hz (100), robot and supervisor (node names)."""
+    retry_delay_s, watchdog_ms, state_hz (100), heartbeat_hz (20), robot and supervisor (node
+    names)."""
 
     def on_configure(self) -> None:
         p = self.params
@@ -52,6 +53,9 @@ class ExtruderNode(LifecycleNode):
         self.robot_name = p.get("robot", "robot")
         self.supervisor_name = p.get("supervisor", "supervisor")
         self.period = 1.0 / float(p.get("state_hz", 100.0))
+        # polls per controller watchdog heartbeat (20 Hz: well inside the 500 ms watchdog)
+        self.hb_every = max(1, round(float(p.get("state_hz", 100.0))
+                                     / float(p.get("heartbeat_hz", 20.0))))
         self.lock = threading.Lock()
         self.connected = False
         self.detail = ""
@@ -133,16 +137,29 @@ class ExtruderNode(LifecycleNode):
 
     # -- poll loop -------------------------------------------------------------------------
     def _poll(self) -> None:
+        """Read and publish the state every period; feed the controller watchdog at
+        ``heartbeat_hz``. One Modbus exchange per state (a heartbeat write only every few):
+        each exchange needs the controller process scheduled, and on a loaded host those
+        wake-ups are what delays the state. A state later than 5 periods is logged with
+        where the time went (lock, exchange and retries, publishing, scheduling)."""
         next_t = time.monotonic()
+        last_pub = next_t
+        slow = 5 * self.period
         while not self.stopping.is_set() and self.bus is not None:
             self._seq += 1
+            t0 = time.monotonic()
+            failed0 = getattr(self.driver, "attempts_failed", 0)
+            t_lock = t_ex = t0
             try:
                 with self.lock:
+                    t_lock = time.monotonic()
                     if self.want_stop:
                         self.driver.stop()
                         self.want_stop = False
-                    self.driver.heartbeat()
+                    if self._seq % self.hb_every == 0:
+                        self.driver.heartbeat()
                     r = self.driver.read()
+                    t_ex = time.monotonic()
                 self.connected = True
                 msg = ExtruderState(time.time(), self._seq, r.rate_set, r.rate, r.volume,
                                     r.running, True, r.fault,
@@ -154,11 +171,19 @@ class ExtruderNode(LifecycleNode):
                 msg = ExtruderState(time.time(), self._seq, 0.0, 0.0, 0.0, False, False,
                                     FAULT_LINK, self.detail)
             self.bus.publish("state", msg)
+            t1 = time.monotonic()
+            if t1 - last_pub > slow:
+                log.warning("state published %.0f ms after the previous one: scheduling %.0f ms,"
+                            " lock %.0f ms, exchange %.0f ms (%d retries), publish %.0f ms",
+                            1000 * (t1 - last_pub), 1000 * max(0.0, t0 - max(last_pub, next_t)),
+                            1000 * (t_lock - t0), 1000 * (t_ex - t_lock),
+                            getattr(self.driver, "attempts_failed", 0) - failed0,
+                            1000 * (t1 - t_ex))
+            last_pub = t1
             next_t += self.period
-            delay = next_t - time.monotonic()
-            if delay < -1.0:  # after a long retry, do not try to catch up
-                next_t = time.monotonic()
-            time.sleep(max(0.0, delay))
+            if next_t < t1:  # late: publish the next state a period from now, no burst
+                next_t = t1 + self.period
+            time.sleep(max(0.0, next_t - time.monotonic()))
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -69,9 +69,12 @@ def cell_file_of(params: dict[str, Any]) -> str | None:
 def must_run_mask(extrude: np.ndarray, lead_n: int, margin_n: int, start: int) -> np.ndarray:
     """Samples at which the extruder must already be running.
 
-    The supervisor switches the extruder ``lead_n`` samples ahead of each change of
-    ``extrude``; a deposition sample needs the motor on unless its switch-on was less than
-    ``margin_n`` samples ago (command latency) or its switch-off lead has begun.
+    The robot node switches the extruder ``lead_n`` samples ahead of each change of
+    ``extrude`` (``cmd_on``); a deposition sample needs the motor on unless its switch-off lead
+    has begun or the last switch-on was less than ``margin_n`` samples ago (command latency).
+    A stream that starts with the extruder on (the supervisor started it) counts as switched on
+    before ``start``. The whole window since the last switch-on counts, so travel moves shorter
+    than the margin cannot make a fresh switch-on look settled.
 
     Args:
         extrude: (K,) bool. Returns (K,) bool.
@@ -79,8 +82,9 @@ def must_run_mask(extrude: np.ndarray, lead_n: int, margin_n: int, start: int) -
     K = extrude.shape[0]
     idx = np.arange(K)
     cmd_on = extrude[np.minimum(idx + lead_n, K - 1)]
-    before = idx - margin_n
-    settled = np.where(before >= start, cmd_on[np.clip(before, 0, K - 1)], True)
+    off = ~cmd_on & (idx >= start)
+    last_off = np.maximum.accumulate(np.where(off, idx, -1))  # last "off" sample at or before k
+    settled = (last_off < start) | (idx - last_off - 1 >= margin_n)
     return np.asarray(extrude & cmd_on & settled)
 
 
@@ -111,6 +115,7 @@ class RobotNode(LifecycleNode):
         self.waypoint = -1
         self._ext: ExtruderState | None = None
         self._ext_t = 0.0
+        self.max_age = 0.0  # s, oldest extruder state the guard saw in the current stream
         self._motion_lock = threading.Lock()
         self._motion: threading.Thread | None = None
         self._abort_move = threading.Event()
@@ -170,8 +175,8 @@ class RobotNode(LifecycleNode):
 
     # -- interlocks ------------------------------------------------------------------------
     def _guard_factory(self, plan: StreamPlan, start: int, lead_s: float) -> Any:
-        must = must_run_mask(plan.extrude, self._samples(lead_s, plan), self._samples(
-            self.margin_s, plan), start)
+        must = must_run_mask(plan.extrude, self._lead_samples(lead_s, plan),
+                             self._latency_samples(self.margin_s, plan), start)
 
         def guard(k: int) -> str:
             if self.estopped:
@@ -182,6 +187,8 @@ class RobotNode(LifecycleNode):
                 return f"{self.supervisor_name} process lost"
             if must[k]:
                 ext, age = self._ext, time.monotonic() - self._ext_t
+                if age > self.max_age:
+                    self.max_age = age
                 if ext is None or age > self.fresh_s:
                     return f"no extruder state for {age * 1000:.0f} ms"
                 if ext.fault:
@@ -192,9 +199,15 @@ class RobotNode(LifecycleNode):
 
         return guard
 
-    def _samples(self, seconds: float, plan: StreamPlan) -> int:
-        """Servo samples spanning ``seconds`` of wall time (a fast twin runs more per second):
-        the extruder's flow response and the command latency are wall-clock."""
+    def _lead_samples(self, lead_s: float, plan: StreamPlan) -> int:
+        """Servo samples spanning the lead ``lead_s``: it compensates the extruder's flow
+        response, which runs on the twin's clock (the emulated extruder is scaled with it; the
+        real cell has time_scale 1), so it is simulated time: samples times dt."""
+        return round(lead_s / plan.dt)
+
+    def _latency_samples(self, seconds: float, plan: StreamPlan) -> int:
+        """Servo samples spanning ``seconds`` of wall time: the switch command's latency (bus,
+        Modbus, the next state) is wall-clock, and a fast twin runs more samples per second."""
         return round(seconds * self.servo.time_scale / plan.dt)
 
     # -- commands --------------------------------------------------------------------------
@@ -274,7 +287,7 @@ class RobotNode(LifecycleNode):
         lead_s = float(cmd.arg("lead_s", 0.0))
         rate = float(cmd.arg("rate", 6.57))
         guard = self._guard_factory(plan, start, lead_s)
-        lead_n = self._samples(lead_s, plan)
+        lead_n = self._lead_samples(lead_s, plan)
         K = plan.samples
         cmd_on = plan.extrude[np.minimum(np.arange(K) + lead_n, K - 1)]
         switched = {"on": bool(cmd_on[start])}
@@ -297,6 +310,7 @@ class RobotNode(LifecycleNode):
                                                     int(plan.wp_sample[i]), time.time()),
                         express=True)
 
+        self.max_age = 0.0
         stream = ServoStream(self.driver, plan, start, guard, on_sample=on_sample,
                              on_waypoint=on_waypoint, after_waypoint=after)
         self.stream = stream
@@ -316,6 +330,8 @@ class RobotNode(LifecycleNode):
             if result.reason:
                 log.warning("stream of %s stopped at sample %d: %s", job, result.last_sample,
                             result.reason)
+            log.info("stream of %s: oldest extruder state while depositing %.0f ms", job,
+                     self.max_age * 1000)
             self._in_motion.clear()
             self._event(StreamEvent(job, "done" if result.done else "stopped", result.reason,
                                     result.last_sample, result.stop_t))

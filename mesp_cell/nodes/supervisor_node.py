@@ -44,7 +44,7 @@ class Stopped(Exception):
 
 class SupervisorNode(LifecycleNode):
     """See the module docstring. Parameters: jobs_db, rate (mm^3/s), lead_s, prime_s, dt,
-    time_scale (of the twin, for the ETA),
+    time_scale (of the twin and the emulated extruder: ETA, lead and prime waits), settle_s,
     robot/extruder/slicer/planner (node names), slice_timeout_s, plan_timeout_s, move_timeout_s,
     poll_s."""
 
@@ -56,7 +56,9 @@ class SupervisorNode(LifecycleNode):
         self.lead_s = float(p.get("lead_s", 0.3))
         self.prime_s = float(p.get("prime_s", 0.5))
         self.dt = float(p.get("dt", 0.002))
-        self.time_scale = float(p.get("time_scale", 1.0))  # the twin's speed-up (ETA only)
+        # The twin's speed-up; the emulated extruder runs on the same clock (ETA, lead, prime).
+        self.time_scale = float(p.get("time_scale", 1.0))
+        self.settle_s = float(p.get("settle_s", 0.05))  # wall s for a switch-on to show
         self.names = {k: p.get(k, k) for k in ("robot", "extruder", "slicer", "planner")}
         self.timeouts = {"slice": float(p.get("slice_timeout_s", 3600.0)),
                          "plan": float(p.get("plan_timeout_s", 3600.0)),
@@ -238,7 +240,10 @@ class SupervisorNode(LifecycleNode):
             on = bool(plan.extrude[min(start + lead_n, plan.samples - 1)])
             if on:
                 self._extruder("start", rate=self.rate)
-                time.sleep(self.lead_s + (0.0 if resume else self.prime_s))
+                # Lead and prime run on the extruder's (the twin's) clock; the switch-on must
+                # also show in the extruder state (wall-clock latency) before the stream starts.
+                wait = (self.lead_s + (0.0 if resume else self.prime_s)) / self.time_scale
+                time.sleep(max(wait, min(self.lead_s, self.settle_s)))
             self._check_request()
             reply = self._request(robot, Command.make("stream", job.id, start=start,
                                                       after_waypoint=after, lead_s=self.lead_s,

@@ -181,18 +181,21 @@ def cotan_laplacian(vertices: NDArray[np.float64], faces: NDArray[np.integer],
                     robust: bool = False) -> sp.csr_matrix:
     """(n, n) positive semi-definite cotangent Laplacian L (x^T L x = sum w_ij (x_i - x_j)^2).
 
-    ``robust`` uses the intrinsic Delaunay cotangent matrix (libigl), whose weights are all
-    non-negative even on sliver triangles from marching tetrahedra.
+    ``robust`` uses the intrinsic Delaunay Laplacian with intrinsic mollification
+    (robust-laplacian, Sharp & Crane 2020): its weights are non-negative on the sliver and
+    zero-area triangles that marching tetrahedra produce, where libigl's intrinsic Delaunay
+    flips never terminate (measured: unbounded memory on a collinear triangle).
     """
     n = len(vertices)
     if robust:
-        import igl
+        import robust_laplacian
 
-        res = igl.intrinsic_delaunay_cotmatrix(
+        lap, _mass = robust_laplacian.mesh_laplacian(
             np.ascontiguousarray(vertices, dtype=np.float64),
-            np.ascontiguousarray(faces, dtype=np.int64))
-        cot = res[0] if isinstance(res, tuple) else res  # newer libigl also returns l, F
-        return sp.csr_matrix(-sp.csr_matrix(cot))
+            np.ascontiguousarray(faces, dtype=np.int64),
+            mollify_factor=1e-5,
+        )
+        return sp.csr_matrix(lap)
     i, j, w = cotan_weights(vertices, faces)
     off = sp.coo_matrix((-w, (i, j)), shape=(n, n))
     off = off + off.T

@@ -29,6 +29,24 @@ def test_first_order_flow_and_totaliser_are_exact() -> None:
     assert plant.true_volume == pytest.approx(1.25 * volume, rel=1e-12)
 
 
+def test_a_scaled_plant_runs_its_flow_on_the_twin_clock_and_its_watchdog_on_the_wall() -> None:
+    # time_scale 40: 0.05 wall s are 2 simulated s of flow (tau 0.2 s), but the host
+    # watchdog (0.5 s) still counts wall seconds.
+    plant = ExtruderPlant(PlantParams(tau_s=0.2, watchdog_s=0.5, time_scale=40.0), 0.0)
+    plant.set_rate(6.0, 0.0)
+    plant.command(R.CMD_RUN, 0.0)
+    plant.step(0.05)
+    T = 2.0
+    assert plant.rate == pytest.approx(6.0 * (1 - math.exp(-T / 0.2)), rel=1e-12)
+    assert plant.volume == pytest.approx(6.0 * (T - 0.2 * (1 - math.exp(-T / 0.2))), rel=1e-12)
+    plant.step(0.45)  # 18 simulated s, 0.45 wall s without a heartbeat: still running
+    assert plant.running and plant.fault == 0
+    plant.step(0.51)
+    assert not plant.running and plant.fault & FAULT_WATCHDOG
+    with pytest.raises(ValueError):
+        PlantParams(time_scale=0.0)
+
+
 def test_watchdog_stall_estop_and_reset() -> None:
     plant = ExtruderPlant(PlantParams(watchdog_s=0.5), 0.0)
     plant.set_rate(5.0, 0.0)

@@ -137,6 +137,35 @@ def test_must_run_mask() -> None:
     assert not np.any(mask & ~extrude)
 
 
+def test_must_run_mask_short_travel_within_the_margin() -> None:
+    # Paths separated by 2-sample travel moves, margin 4: a switch-on less than 4 samples
+    # old is never required, even though the sample 4 back was inside the previous path.
+    extrude = np.array([1, 1, 1, 1, 1, 0, 0, 1, 1, 1, 1, 1, 1, 1, 0, 0, 1, 1], bool)
+    mask = must_run_mask(extrude, lead_n=1, margin_n=4, start=0)
+    cmd_on = extrude[np.minimum(np.arange(extrude.size) + 1, extrude.size - 1)]
+    off = np.flatnonzero(~cmd_on)
+    for k in np.flatnonzero(mask):
+        assert cmd_on[k] and extrude[k]
+        assert all(k - o - 1 >= 4 for o in off if o < k), k
+    # Running since the start (the supervisor started it): required at once, until the
+    # first switch-off lead; after each travel move only once the margin has passed.
+    assert np.array_equal(np.flatnonzero(mask), [0, 1, 2, 3, 10, 11, 12])
+
+
+def test_a_fast_twin_keeps_its_time_scale_without_spinning(job: Path) -> None:
+    plan = StreamPlan.load(job / "trajectory.npz", 0.002)
+    twin = KinematicTwin(ServoConfig(time_scale=10.0), q0=synthetic.HOME)
+    twin.connect()
+    nominal = plan.samples * plan.dt / 10.0
+    t0, c0 = time.perf_counter(), time.thread_time()
+    result = ServoStream(twin, plan, 0).run()
+    wall, cpu = time.perf_counter() - t0, time.thread_time() - c0
+    assert result.done
+    assert wall > 0.95 * nominal, (wall, nominal)
+    # A 200 us period: the loop sleeps in batches (releasing the GIL) instead of spinning.
+    assert cpu < 0.6 * wall, (cpu, wall)
+
+
 def test_flange_kinematics_home_pose() -> None:
     # All joints zero: the UR5e arm stretched along -x; flange at x = a2 + a3, y = -(d4 + d6),
     # z = d1 - d5.

@@ -155,3 +155,11 @@ def test_empty_ftetwild_output_is_an_input_error(
     monkeypatch.setattr(pytetwild, "tetrahedralize", empty)
     with pytest.raises(InputError, match="no tets"):
         tetrahedralize(cube_surface, MeshConfig(edge_length_mm=5.0))
+
+
+def test_no_debug_files_in_working_directory(
+    cube_surface: Surface, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.chdir(tmp_path)
+    tetrahedralize(cube_surface, MeshConfig(edge_length_mm=5.0))
+    assert list(tmp_path.iterdir()) == []

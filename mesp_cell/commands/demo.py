@@ -1,0 +1,185 @@
+"""`mesp demo`: a whole print job on a bundled example, through the real processes.
+
+Starts the simulated cell (launch/sim.toml: every node as its own process on the zenoh bus,
+the MuJoCo twin of the UR5e and the emulated Modbus extruder), submits a bundled example,
+follows it through slicing, planning and printing (faster than real time), then runs the
+virtual print (`mesp inspect`) on the result and prints a summary. Everything lands in
+``--out`` (default ``out/demo``): the cell's state, logs and the job directory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from slicer.errors import InputError
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+DEFAULT_EXAMPLE = "hemisphere"
+
+
+def register(sub: Any) -> None:
+    """Add the `demo` sub-command."""
+    p = sub.add_parser(
+        "demo",
+        help="print a bundled example on the MuJoCo twin through the real processes",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "--example",
+        default=DEFAULT_EXAMPLE,
+        help=f"bundled example name in examples/ (default {DEFAULT_EXAMPLE})",
+    )
+    p.add_argument("--out", type=Path, default=Path("out/demo"), help="state and job directory")
+    p.add_argument(
+        "--time-scale",
+        type=float,
+        default=40.0,
+        help="the twin runs this many times faster than real time (default 40)",
+    )
+    p.add_argument("--no-inspect", action="store_true", help="skip the virtual print")
+    p.add_argument("--timeout", type=float, default=900.0, help="give up after this many s")
+    p.set_defaults(func=run)
+
+
+def _example(name: str) -> tuple[Path, Path | None]:
+    models = sorted(p for p in EXAMPLES.glob(f"{name}.*") if p.suffix in {".stl", ".ply", ".obj"})
+    if not models:
+        known = sorted({p.stem for p in EXAMPLES.glob("*.stl")})
+        raise InputError(f"no bundled example '{name}'", f"choose one of {', '.join(known)}")
+    job = EXAMPLES / f"{name}.toml"
+    return models[0], job if job.is_file() else None
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the demo; returns 0 when the job printed completely."""
+    from mesp_cell.launcher import start_cell
+
+    if args.time_scale <= 0:
+        raise InputError(f"--time-scale {args.time_scale}", "give a positive factor, e.g. 40")
+    model, job_file = _example(args.example)
+    home = args.out.resolve()
+    home.mkdir(parents=True, exist_ok=True)
+    os.environ["MESP_HOME"] = str(home)  # the cell's job store, logs and job dirs stay here
+    say = _Printer()
+    say.line(f"mesp demo: {model.name} on the simulated cell (state in {home})")
+    t0 = time.monotonic()
+    with start_cell(overrides={"time_scale": args.time_scale}, on_event=say.event) as cell:
+        say.line(f"cell up in {time.monotonic() - t0:.1f} s: {', '.join(sorted(cell.alive))}")
+        client = cell.client()
+        try:
+            job = client.submit(model, job_file=job_file)
+            say.line(f"submitted job {job.id}")
+            done = client.wait(job.id, on_progress=say.progress, timeout=args.timeout)
+        finally:
+            client.close()
+    say.end_progress()
+    elapsed = time.monotonic() - t0
+    if done.state != "done":
+        print(f"mesp demo: job {done.id} ended {done.state}: {done.reason}", file=sys.stderr)
+        print(f"logs: {home / 'logs'}", file=sys.stderr)
+        return 1
+    job_dir = Path(done.dir)
+    say.line(
+        f"printed {done.id}: {done.layers} layers, {done.waypoints} waypoints, "
+        f"{done.volume:.0f} mm^3 extruded, in {elapsed:.0f} s wall time"
+    )
+    if not args.no_inspect:
+        _inspect(job_dir)
+    _summary(job_dir)
+    return 0
+
+
+def _inspect(job_dir: Path) -> None:
+    from mesp_cell.cli import build_parser
+
+    inspect_args = build_parser().parse_args(["inspect", str(job_dir), "--quiet"])
+    inspect_args.func(inspect_args)
+
+
+def _summary(job_dir: Path) -> None:
+    from slicer.report import read_report
+
+    report = read_report(job_dir)
+    rows = []
+    model = report.get("model", {})
+    rows.append(("model volume", f"{model.get('volume_mm3', float('nan')):.0f} mm^3"))
+    mesh = report.get("mesh", {})
+    rows.append(("tet mesh", f"{mesh.get('tets', 0)} tets"))
+    slicing = report.get("slicing", {})
+    height = slicing.get("height_mm", {})
+    rows.append(
+        (
+            "layers",
+            f"{slicing.get('layers')} (H mean {height.get('mean', 0):.3f} mm, "
+            f"std {height.get('std', 0):.4f} mm; initial std "
+            f"{slicing.get('height_std_initial_mm', 0):.4f} mm)",
+        )
+    )
+    tp = report.get("toolpath", {})
+    rows.append(
+        (
+            "toolpath",
+            f"{tp.get('waypoints')} waypoints, {tp.get('length_mm', 0) / 1000:.1f} m, "
+            f"volume error {100 * tp.get('volume_error', float('nan')):+.2f}%",
+        )
+    )
+    plan = report.get("plan", {})
+    if plan:
+        rows.append(("trajectory", f"{plan.get('duration_s', float('nan')):.0f} s of printing"))
+    inspect = report.get("inspect", {})
+    if inspect:
+        surf = inspect.get("surface_error_mm", {})
+        rows.append(
+            (
+                "virtual print",
+                f"infill {100 * inspect.get('infill_ratio', 0):.2f}%, pores "
+                f"{100 * inspect.get('pore_ratio', 0):.2f}%, surface error mean "
+                f"{surf.get('mean', float('nan')):.3f} mm",
+            )
+        )
+    width = max(len(k) for k, _ in rows)
+    print()
+    for key, value in rows:
+        print(f"  {key:<{width}}  {value}")
+    print(f"\n  artifacts, report.json and figures: {job_dir}")
+
+
+class _Printer:
+    """Operator-facing lines, and one live progress line while printing."""
+
+    def __init__(self) -> None:
+        self.live = sys.stdout.isatty()
+        self._last = ""
+        self._last_t = 0.0
+
+    def line(self, text: str) -> None:
+        self.end_progress()
+        print(text, flush=True)
+
+    def event(self, text: str) -> None:
+        if "fail" in text or "exit" in text or "restart" in text:
+            self.line(f"  [cell] {text}")
+
+    def progress(self, job: Any) -> None:
+        text = f"  {job.state:<9} layer {job.layer + 1}/{job.layers}  {job.percent:5.1f}%"
+        if job.eta_s and job.eta_s > 0:
+            text += f"  ETA {job.eta_s:5.0f} s"
+        text += f"  {job.volume:8.0f} mm^3"
+        now = time.monotonic()
+        if self.live:
+            print("\r" + text + "\x1b[K", end="", flush=True)
+            self._last = text
+        elif job.state != self._last or now - self._last_t > 10.0:
+            print(text, flush=True)
+            self._last, self._last_t = job.state, now
+
+    def end_progress(self) -> None:
+        if self.live and self._last:
+            print(flush=True)
+            self._last = ""
