@@ -1,0 +1,155 @@
+"""A fast simulated print: many short paths and travel moves at a high time scale.
+
+The whole cell runs (real processes, the emulated Modbus extruder on the twin's scaled clock)
+with a synthetic job (``slice_job``/``plan_job`` below, named by the launch overrides) whose
+travel moves between paths are far shorter than the old wall-clock lead and margin spanned at
+40x. The job must print completely, every waypoint once, and the extruder's totaliser must
+agree with the deposition time of the trajectory in simulated time.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from slicer.artifacts import save_npz
+from slicer.stages import Toolpath
+
+HOME = np.radians([0.0, -100.0, 100.0, -90.0, -90.0, 0.0])
+PATHS = 40          # deposition paths
+PER_PATH = 8        # waypoints per path
+PATHS_PER_LAYER = 4
+STEP = 10           # trajectory samples per waypoint (0.1 s)
+RATE_HZ = 100.0     # trajectory sample rate
+TRAVEL = 25         # samples (0.25 s) of travel between paths
+TIME_SCALE = 40.0
+RATE = 6.57         # mm^3/s, the supervisor's rate in launch/sim.toml
+
+
+def toolpath() -> Toolpath:
+    """PATHS short straight paths of PER_PATH waypoints, PATHS_PER_LAYER per layer."""
+    n = PATHS * PER_PATH
+    path = np.repeat(np.arange(PATHS), PER_PATH).astype(np.int32)
+    layer = (path // PATHS_PER_LAYER).astype(np.int32)
+    along = np.tile(np.arange(PER_PATH, dtype=np.float64), PATHS)
+    pos = np.stack([along, 2.0 * (path % PATHS_PER_LAYER), 0.6 * layer], axis=1)
+    normal = np.tile([0.0, 0.0, 1.0], (n, 1))
+    return Toolpath(position=pos, normal=normal, layer=layer, path=path,
+                    height=np.full(n, 0.6), width=np.full(n, 1.2), speed=np.full(n, 9.0),
+                    extrude=np.ones(n, bool), pattern=np.zeros(n, np.int8))
+
+
+def trajectory_arrays() -> dict[str, np.ndarray]:
+    """A smooth joint motion around HOME through every waypoint, with a travel move of TRAVEL
+    samples (no deposition) between consecutive paths."""
+    rows_wp: list[int] = []
+    rows_ex: list[bool] = []
+    for p in range(PATHS):
+        for i in range(PER_PATH):
+            rows_wp += [p * PER_PATH + i] + [-1] * (STEP - 1)
+            rows_ex += [True] * STEP
+        rows_wp += [-1] * TRAVEL
+        rows_ex += [False] * TRAVEL
+    wp = np.asarray(rows_wp, dtype=np.int32)
+    M = wp.shape[0]
+    t = np.arange(M) / RATE_HZ
+    s = np.sin(2 * np.pi * t / t[-1])[:, None]
+    q = HOME + 0.15 * s * np.array([1.0, 0.5, -0.5, 0.3, 0.2, 0.1])
+    qd = np.gradient(q, t, axis=0)
+    return {"t": t, "q": q, "qd": qd, "tcp": np.zeros((M, 3)), "waypoint": wp,
+            "alpha": np.full(M, 90.0), "extrude": np.asarray(rows_ex, bool),
+            "base_T": np.eye(4), "tool_T": np.eye(4), "model_T": np.eye(4)}
+
+
+def deposition_s() -> float:
+    """Simulated seconds of deposition in the trajectory."""
+    return PATHS * PER_PATH * STEP / RATE_HZ
+
+
+def slice_job(model: Path, job_file: Path | None, out_dir: Path) -> dict[str, Any]:
+    """Stands in for the slicing pipeline (launch override ``slice_fn``)."""
+    toolpath().save(Path(out_dir))
+    return {}
+
+
+def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
+    """Stands in for the planner (launch override ``plan_fn``)."""
+    save_npz(Path(job_dir) / "trajectory.npz", trajectory_arrays())
+    return {}
+
+
+def test_trajectory_has_short_travel_moves() -> None:
+    a = trajectory_arrays()
+    ex = a["extrude"]
+    starts = np.flatnonzero(ex[1:] & ~ex[:-1]) + 1
+    assert starts.size == PATHS - 1
+    # Every travel move is far shorter than the wall-clock lead (0.3 s) and switch margin
+    # (0.1 s) used to span at 40x (12 s and 4 s of simulated time).
+    assert TRAVEL / RATE_HZ < 0.1 * TIME_SCALE
+
+
+@pytest.mark.timeout(120)
+def test_short_paths_print_completely_at_high_time_scale(tmp_path: Path) -> None:
+    from mesp_cell.launcher import start_cell
+    from mesp_cell.messages import ExtruderState, WaypointReached
+
+    old = os.environ.get("MESP_HOME")
+    os.environ["MESP_HOME"] = str(tmp_path / "home")
+    model = tmp_path / "part.stl"
+    model.write_text("solid part\nendsolid part\n")
+    lock = threading.Lock()
+    waypoints: list[int] = []
+    states: list[ExtruderState] = []
+    try:
+        with start_cell(overrides={"time_scale": TIME_SCALE,
+                                   "slice_fn": "tests.mesp_cell.test_demo:slice_job",
+                                   "plan_fn": "tests.mesp_cell.test_demo:plan_job",
+                                   "prime_s": 0.5}) as cell:
+            client = cell.client()
+            try:
+                bus = client.bus()
+
+                def on_wp(m: WaypointReached) -> None:
+                    with lock:
+                        waypoints.append(m.waypoint)
+
+                def on_ext(m: ExtruderState) -> None:
+                    with lock:
+                        states.append(m)
+
+                bus.subscribe("robot", "waypoint", WaypointReached, on_wp)
+                bus.subscribe("extruder", "state", ExtruderState, on_ext)
+                job = client.submit(model)
+                done = client.wait(job.id, timeout=90)
+                end = time.monotonic() + 2.0  # waypoint events may trail the job's end
+                while time.monotonic() < end and len(waypoints) < PATHS * PER_PATH:
+                    time.sleep(0.01)
+            finally:
+                client.close()
+    finally:
+        if old is None:
+            os.environ.pop("MESP_HOME", None)
+        else:
+            os.environ["MESP_HOME"] = old
+    assert done.state == "done", done.reason
+    with lock:
+        printed = list(waypoints)
+        seen = list(states)
+    all_wp = list(range(PATHS * PER_PATH))
+    assert printed == all_wp, ("a waypoint was skipped or repeated", len(printed),
+                               sorted(set(all_wp) - set(printed)))
+    assert done.percent == 100.0
+    assert seen and not seen[-1].running and not seen[-1].fault, seen[-1:]
+    # The emulated extruder runs on the twin's clock: its totaliser holds the deposition time
+    # of the trajectory (simulated seconds, plus the 0.5 s prime and the 0.3 s lead) at the
+    # rate C; on a wall clock it would hold 40 times less. Each switch's wall-clock latency
+    # (a few ms, 40 times that in simulated time) moves it by a few mm^3, hence the margin.
+    expected = RATE * (deposition_s() + 0.5 + 0.3)
+    print(f"extruded {done.volume:.1f} mm^3, expected {expected:.1f} mm^3")
+    assert 0.6 * expected < done.volume < 1.6 * expected, (done.volume, expected)
