@@ -14,12 +14,28 @@ Unknowns and discretisation:
       smoothing strength to the edge length).
     * Tets owning a boundary face of a region are *constrained*: v = the region's growth
       direction there (eq. 6 constraint; the mean over the tet's region faces if it owns
-      several). The rest are free.
+      several). In a connected part without any region (no critical selector, or a stray
+      fragment left by the mesher) the bottom tets get v = +z. The rest are free.
+    * Tets without a layer height (grad g = 0 up to rounding: all four vertices on one
+      region) carry no weight in the layer-height statistics (``height_weights``).
 
 Steps (each constant matrix is set up once, see ``slicer.solvers``):
-    1. G0 ("harmonic", the baseline): v0 = eq. 6 without the alignment term (pure smoothness,
-       v fixed on constrained tets; without any region: +z on the bottom-most tets), then the
-       Poisson solve of eq. 8 for g0.
+    1. G0, the baseline "harmonic constraint" ([42]; ``INITIAL_FIELD = "scalar"``): Laplace's
+       equation with g fixed on every critical region to the region's area-weighted mean
+       height z (regions ordered by height, as the layers stack along +z); in a connected part
+       where that leaves fewer than two distinct values, the planar default completes it
+       (boundary vertices near the part's bottom and/or top get g = z; see
+       ``_harmonic_anchors``). Its layer height (report.json's height_std_initial_mm) is the
+       baseline of issue 2's criteria. G0 is very uneven wherever the part extends beyond the
+       regions (natural boundary, |grad g| -> 0: socket CV 3.4, aorta CV 3.6 at 2.7 / 3 mm),
+       so its normalised gradient is a poor alignment target there: the iteration started
+       from it wanders (socket 2.7 mm: final std 0.045 mm after 24 iterations, 0.11 mm if
+       the anchors are always added, instead of 0.0086 mm). The iteration is therefore
+       *started* from the harmonic vector field: v0 = eq. 6 without the alignment term (pure
+       smoothness, v fixed on constrained tets; parts without a region: +z on their bottom
+       tets), then the Poisson solve of eq. 8 (report.json's height_std_start_mm).
+       ``INITIAL_FIELD = "vector"`` makes that vector start G0 as well (the former baseline:
+       already CV 0.03, so the aorta's final/initial std ratio was 0.55 at 3 mm).
     2. v = argmin eq. 6 with the alignment target n = grad g / |grad g|; the three components
        share one matrix ``w_l M + w_h Lf`` (restricted to free tets). The solution is then
        renormalised to unit length per tet (``NORMALISE_V``): the smoothing shortens v where
@@ -27,11 +43,14 @@ Steps (each constant matrix is set up once, see ``slicer.solvers``):
        effect with the default w_h = 1 is small (final std 0.0086 mm either way on the socket
        example at 29k tets, 0.0075 vs 0.0076 mm on the aorta; 0.0117 vs 0.0119 mm on the
        socket with w_h = 10).
-       The scheme meets the issue's target on the socket example (examples/socket.toml, rim
-       critical): final std 15-22 % of the initial, CV 0.01, so nothing more was needed.
-       Where critical regions on both ends fix the layer count along every path (e.g. a
-       cup wall between a flat bottom and a wavy rim) the remaining variation is geometric
-       and no field can remove it (paper 4.1); the iteration then stops after 2-3 steps.
+       Measured (issue 2: final std <= 0.30 x initial, CV <= 0.20), final std relative to
+       the scalar harmonic G0 / to the vector start: socket (top:45) 2.7 mm 0.003 / 0.15,
+       CV 0.009; aorta (bottom:30, five regions) 1.8 mm 0.004 / 0.42, CV 0.012, 3 mm
+       0.005 / 0.55, CV 0.018. On the aorta most of the remaining variance (75 %) is in the
+       arch, between start regions at several heights (tube ends at z 0 and 80, arch
+       underside, lumen ceiling): the layer count between them is fixed along every path,
+       so that variation is geometric and no field removes it (paper 4.1); tighter
+       convergence (1e-3) or w_h 0.1..3 moved the ratio to the vector start only to ~0.4.
     3. g = argmin sum vol |grad g - v|^2 with the collapsed unknowns (Poisson, eq. 8);
        O_align = that minimum. Stop when O_align changes by less than ``convergence``
        (relative) or after ``max_iterations``.
@@ -70,6 +89,7 @@ HARMONIC_REGULARISATION = 1e-8  # tiny mass term keeping the pure-smoothness sys
 # Krylov steps (CPU 8.7 s instead of 12.0 s for the whole field).
 POISSON_RTOL = 1e-6
 VECTOR_RTOL = 1e-5
+ZERO_GRADIENT = 1e-9  # |grad g| below this times its mean: rounding of a constant (no height)
 GRADIENT_FLOOR = 1e-6  # |grad g| below this times its mean counts as this (finite heights)
 
 
@@ -104,37 +124,62 @@ def _weighted_quantiles(x: np.ndarray, w: np.ndarray, q: np.ndarray) -> np.ndarr
     return np.interp(q, cw, x[order])
 
 
+def height_weights(gradient: np.ndarray, volume: np.ndarray) -> np.ndarray:
+    """Per-tet weight of the layer-height statistics: the volume, 0 where grad g is zero.
+
+    g is constant on a critical region, so a tet with all four vertices on one region (a flat
+    tet along a curved region, common at coarse meshes) has grad g = 0 up to rounding
+    (below ``ZERO_GRADIENT`` times the volume-weighted mean |grad g|): it lies inside
+    one layer and has no layer height. Weighting it would put a floored, ~1e5-times-too-large
+    height into the statistics (aorta at 6 mm: one such tet of 1e-5 of the volume made the std
+    160 mm). A gradient that is merely small still counts.
+
+    Args:
+        gradient: (T, 3) float64, per-tet gradient.
+        volume: (T,) float64, mm^3.
+
+    Returns:
+        (T,) float64, mm^3.
+    """
+    norm = np.linalg.norm(gradient, axis=1)
+    wsum = float(volume.sum())
+    mean_norm = float((norm * volume).sum() / wsum) if wsum > 0 else 0.0
+    return np.where(norm > ZERO_GRADIENT * mean_norm, volume, 0.0)
+
+
 def layer_heights(gradient: np.ndarray, volume: np.ndarray,
                   layer_height: float) -> tuple[np.ndarray, float]:
     """Per-tet physical layer height with the iso-spacing scaled to the target mean.
 
     Args:
         gradient: (T, 3) float64, per-tet field gradient (field units per mm).
-        volume: (T,) float64, mm^3, tet volumes (the weights).
-        layer_height: float, mm, target volume-weighted mean height.
+        volume: (T,) float64, mm^3, tet volumes (the weights, see ``height_weights``).
+        layer_height: float, mm, target weighted mean height.
 
     Returns:
         (H (T,) float64 mm, delta float in field units): H = delta / |grad g|, where delta is
-        chosen so that sum(vol * H) / sum(vol) = layer_height. |grad g| is floored at
-        GRADIENT_FLOOR times its volume-weighted mean so a flat spot gives a finite height.
+        chosen so that sum(w * H) / sum(w) = layer_height with w = ``height_weights``.
+        |grad g| is floored at GRADIENT_FLOOR times its weighted mean so a flat spot (and a
+        tet without layer height, which has no weight) gets a finite height.
     """
     norm = np.linalg.norm(gradient, axis=1)
-    wsum = float(volume.sum())
-    mean_norm = float((norm * volume).sum() / wsum) if wsum > 0 else 0.0
+    w = height_weights(gradient, volume)
+    wsum = float(w.sum())
+    mean_norm = float((norm * w).sum() / wsum) if wsum > 0 else 0.0
     if mean_norm <= tol.zero:
         return np.full(len(norm), np.inf), float("nan")
     norm = np.maximum(norm, GRADIENT_FLOOR * mean_norm)
-    delta = layer_height * wsum / float((volume / norm).sum())
+    delta = layer_height * wsum / float((w / norm).sum())
     return delta / norm, delta
 
 
 def stats_of_gradient(gradient: np.ndarray, volume: np.ndarray,
                       layer_height: float) -> HeightStats:
-    """Volume-weighted layer-height statistics of a field (same target mean for any field).
+    """Weighted layer-height statistics of a field (same target mean for any field).
 
     Args:
         gradient: (T, 3) float64, per-tet gradient.
-        volume: (T,) float64, mm^3.
+        volume: (T,) float64, mm^3 (weights: ``height_weights``, tets without height skipped).
         layer_height: float, mm, target mean.
 
     Returns:
@@ -142,10 +187,12 @@ def stats_of_gradient(gradient: np.ndarray, volume: np.ndarray,
         fields compares like with like.
     """
     h, _ = layer_heights(gradient, volume, layer_height)
-    w = volume
-    if not np.all(np.isfinite(h)) or w.sum() <= 0:
+    w = height_weights(gradient, volume)
+    use = w > 0
+    if not np.all(np.isfinite(h)) or not use.any():
         nan = float("nan")
         return HeightStats(nan, nan, nan, nan, nan, nan)
+    h, w = h[use], w[use]
     mean = float((h * w).sum() / w.sum())
     std = float(np.sqrt((w * (h - mean) ** 2).sum() / w.sum()))
     p5, p95 = _weighted_quantiles(h, w, np.array([0.05, 0.95]))
@@ -159,7 +206,8 @@ class HeightDistribution:
 
     Attributes:
         per_tet: (T,) float64, mm, H = delta / |grad g| per tet.
-        volume: (T,) float64, mm^3, tet volumes (the weights of every statistic).
+        volume: (T,) float64, mm^3, the weights of every statistic: tet volumes, 0 for tets
+            without a layer height (``height_weights``).
         delta: float, field units, the iso-spacing giving the target mean height.
         stats: the volume-weighted statistics.
     """
@@ -189,7 +237,7 @@ def height_stats(mesh: TetMesh | TetOperators, g: np.ndarray,
     ops = mesh if isinstance(mesh, TetOperators) else build_operators(mesh)
     grad = ops.gradient(np.asarray(g, dtype=np.float64))
     h, delta = layer_heights(grad, ops.volume, layer_height)
-    return HeightDistribution(per_tet=h, volume=ops.volume, delta=delta,
+    return HeightDistribution(per_tet=h, volume=height_weights(grad, ops.volume), delta=delta,
                               stats=stats_of_gradient(grad, ops.volume, layer_height))
 
 
@@ -278,8 +326,33 @@ def _unknown_map(n_vertices: int, selection: CriticalSelection) -> tuple[np.ndar
     return labels.astype(np.int64), int(count)
 
 
-def _constraints(ops: TetOperators, selection: CriticalSelection) -> tuple[np.ndarray, np.ndarray]:
-    """Constrained tets and their fixed vectors: ((T,) bool, (T, 3) float64 unit)."""
+def _vertex_components(ops: TetOperators) -> np.ndarray:
+    """(V,) int64 connected-part label per vertex (vertices connected through tets)."""
+    _, comp = connected_components(ops.laplacian, directed=False)
+    return comp.astype(np.int64)
+
+
+def _mean_edge(ops: TetOperators) -> float:
+    return float(np.linalg.norm(ops.vertices[ops.tets[:, 1]] - ops.vertices[ops.tets[:, 0]],
+                                axis=1).mean())
+
+
+def _part_extremes(values: np.ndarray, comp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-part min and max of a vertex quantity: ((P,), (P,))."""
+    lo = np.full(int(comp.max()) + 1, np.inf)
+    hi = np.full(len(lo), -np.inf)
+    np.minimum.at(lo, comp, values)
+    np.maximum.at(hi, comp, values)
+    return lo, hi
+
+
+def _constraints(ops: TetOperators, selection: CriticalSelection,
+                 comp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Constrained tets and their fixed vectors: ((T,) bool, (T, 3) float64 unit).
+
+    A connected part of the mesh without any region (the whole mesh when there is none, or
+    a stray fragment of the mesher) gets the planar default: its bottom tets grow along +z.
+    """
     n = ops.n_tets
     fixed = np.zeros((n, 3))
     if selection.regions:
@@ -287,12 +360,15 @@ def _constraints(ops: TetOperators, selection: CriticalSelection) -> tuple[np.nd
         grow = np.concatenate([r.growth * ops.boundary.area[r.faces, None]
                                for r in selection.regions])
         np.add.at(fixed, tets, grow)
-    else:
-        # No region: the layers start at the bottom, growing along +z.
+    tet_part = comp[ops.tets[:, 0]]
+    has_region = np.zeros(int(comp.max()) + 1 if len(comp) else 0, dtype=bool)
+    has_region[tet_part[np.linalg.norm(fixed, axis=1) > tol.zero]] = True
+    bare = ~has_region[tet_part]
+    if bare.any():
+        # The layers start at the part's bottom, growing along +z.
         z = ops.vertices[:, 2]
-        edge = np.linalg.norm(ops.vertices[ops.tets[:, 1]] - ops.vertices[ops.tets[:, 0]],
-                              axis=1).mean()
-        bottom = z[ops.tets].min(axis=1) <= z.min() + 0.5 * edge
+        zmin, _ = _part_extremes(z, comp)
+        bottom = bare & (z[ops.tets].min(axis=1) <= zmin[tet_part] + 0.5 * _mean_edge(ops))
         fixed[bottom] = (0.0, 0.0, 1.0)
     norm = np.linalg.norm(fixed, axis=1)
     constrained = norm > tol.zero
@@ -344,39 +420,49 @@ class _Poisson:
         return g, o_align, status
 
 
-def _harmonic_anchors(ops: TetOperators, selection: CriticalSelection,
-                      labels: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+def _harmonic_anchors(ops: TetOperators, selection: CriticalSelection, labels: np.ndarray,
+                      comp: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Dirichlet data of the scalar harmonic G0: (unknown indices, values), both (k,).
 
     Each critical region's (collapsed) unknown gets the region's area-weighted mean height z.
-    When that leaves fewer than two distinct values (one region, or none) the field would be
-    constant, so the planar default completes it: boundary vertices within half an edge of the
-    lowest z (when no region is a start surface) and of the highest z (when none is an end
-    surface) get g = z, i.e. layers start flat on the build plate / end flat at the top.
+    In a connected part where that leaves fewer than two distinct values (one region, or none)
+    the field would be constant, so the planar default completes it: the part's boundary
+    vertices within half an edge of its lowest z (when none of its regions is a start
+    surface) and of its highest z (when none is an end surface) get g = z, i.e. layers start
+    flat on the build plate / end flat at the top.
     """
+    n_parts = int(comp.max()) + 1 if len(comp) else 0
     idx: list[np.ndarray] = []
     val: list[np.ndarray] = []
-    for r in selection.regions:
+    part = np.zeros(len(selection.regions), dtype=np.int64)
+    for k, r in enumerate(selection.regions):  # loop over regions, not faces
         area = ops.boundary.area[r.faces]
         zc = ops.vertices[ops.boundary.faces[r.faces], 2].mean(axis=1)
         idx.append(labels[r.vertices[:1]])
         val.append(np.array([float((zc * area).sum() / max(float(area.sum()), tol.zero))]))
+        part[k] = comp[r.vertices[0]]
     values = np.concatenate(val) if val else np.zeros(0)
-    if len(values) == 0 or np.ptp(values) <= tol.zero * max(1.0, float(np.abs(values).max())):
+    signs = np.array([r.sign for r in selection.regions])
+    lo_v, hi_v = np.full(n_parts, np.inf), np.full(n_parts, -np.inf)
+    np.minimum.at(lo_v, part, values)
+    np.maximum.at(hi_v, part, values)
+    scale = max(1.0, float(np.abs(ops.vertices[:, 2]).max()))
+    flat = ~(hi_v - lo_v > tol.zero * scale)  # also the parts without any region
+    has_start = np.zeros(n_parts, dtype=bool)
+    has_end = np.zeros(n_parts, dtype=bool)
+    has_start[part[signs < 0]] = True
+    has_end[part[signs > 0]] = True
+    if flat.any():
         z = ops.vertices[:, 2]
         on_boundary = np.zeros(ops.n_vertices, dtype=bool)
         on_boundary[ops.boundary.faces.ravel()] = True
-        edge = float(np.linalg.norm(ops.vertices[ops.tets[:, 1]] - ops.vertices[ops.tets[:, 0]],
-                                    axis=1).mean())
-        signs = {r.sign for r in selection.regions}
-        if -1.0 not in signs:
-            base = np.flatnonzero(on_boundary & (z <= z.min() + 0.5 * edge))
-            idx.append(labels[base])
-            values = np.concatenate([values, z[base]])
-        if 1.0 not in signs:
-            top = np.flatnonzero(on_boundary & (z >= z.max() - 0.5 * edge))
-            idx.append(labels[top])
-            values = np.concatenate([values, z[top]])
+        zmin, zmax = _part_extremes(z, comp)
+        half = 0.5 * _mean_edge(ops)
+        base = on_boundary & (flat & ~has_start)[comp] & (z <= zmin[comp] + half)
+        top = on_boundary & (flat & ~has_end)[comp] & (z >= zmax[comp] - half)
+        extra = np.flatnonzero(base | top)
+        idx.append(labels[extra])
+        values = np.concatenate([values, z[extra]])
     unknowns = np.concatenate(idx) if idx else np.zeros(0, dtype=np.int64)
     # A vertex may be picked twice (an anchor on a region): keep its first value (the region's).
     unknowns, first = np.unique(unknowns, return_index=True)
@@ -418,7 +504,8 @@ def _normalised(vec: np.ndarray, fallback: np.ndarray) -> np.ndarray:
 def height_std(gradient: np.ndarray, volume: np.ndarray, layer_height: float) -> float:
     """Just the volume-weighted std of ``layer_heights`` (mm), cheap enough per iteration."""
     h, _ = layer_heights(gradient, volume, layer_height)
-    w = volume / volume.sum()
+    w = height_weights(gradient, volume)
+    w = w / w.sum()
     mean = float(w @ h)
     return float(np.sqrt(w @ (h - mean) ** 2))
 
@@ -488,7 +575,8 @@ def _compute_field(
     selection = select_critical_regions(ops, config.selectors)
     notes.extend(selection.notes)
     timings["regions"] = time.perf_counter() - t
-    constrained, fixed = _constraints(ops, selection)
+    comp = _vertex_components(ops)
+    constrained, fixed = _constraints(ops, selection, comp)
     target_h = config.layer_height_mm
     vol = ops.volume
 
@@ -540,7 +628,7 @@ def _compute_field(
     g_start, _, st_p = poisson.solve(v)
     st_s = "ok"
     if INITIAL_FIELD == "scalar":
-        scalar = _ScalarHarmonic(poisson, *_harmonic_anchors(ops, selection, labels, count))
+        scalar = _ScalarHarmonic(poisson, *_harmonic_anchors(ops, selection, labels, comp))
         g0, st_s = scalar.solve()
         if scalar.solver.status != "ok":
             notes.append(f"scalar harmonic solver: {scalar.solver.status}")

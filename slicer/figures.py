@@ -28,23 +28,30 @@ def height_histogram(
         path: output PNG.
     """
     fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=120)
-    both = np.concatenate([initial, final])
-    lo, hi = np.percentile(both, [0.5, 99.5])
-    bins = np.linspace(lo, hi, 60)
-    series = ((initial, "initial (harmonic)", "tab:grey"), (final, "final", "tab:blue"))
-    for values, label, colour in series:
+    # Statistics of the true values; the drawing range follows the final field (with room
+    # either side), since the harmonic baseline can have a very long tail.
+    labels = []
+    for values in (initial, final):
         mean = np.average(values, weights=weights)
-        std = np.sqrt(np.average((values - mean) ** 2, weights=weights))
+        labels.append(np.sqrt(np.average((values - mean) ** 2, weights=weights)))
+    lo, hi = np.percentile(final, [0.5, 99.5])
+    lo, hi = max(0.0, lo - 2.0 * (hi - lo) - 0.1 * target), hi + 2.0 * (hi - lo) + 0.1 * target
+    bins = np.linspace(lo, hi, 60)
+    series = (
+        (np.clip(initial, lo, hi), f"initial (harmonic): std {labels[0]:.3f} mm", "tab:grey"),
+        (final, f"final: std {labels[1]:.3f} mm", "tab:blue"),
+    )
+    for values, label, colour in series:
         ax.hist(
             values,
             bins=bins.tolist(),
             weights=weights / weights.sum(),
             alpha=0.6,
             color=colour,
-            label=f"{label}: std {std:.3f} mm",
+            label=label,
         )
     ax.axvline(target, color="k", linestyle="--", linewidth=1, label=f"target {target:.2f} mm")
-    ax.set_xlabel("layer height H (mm)")
+    ax.set_xlabel("layer height H (mm; values outside the axis are drawn at its ends)")
     ax.set_ylabel("volume fraction")
     ax.set_title("Layer height distribution")
     ax.legend(fontsize=8)

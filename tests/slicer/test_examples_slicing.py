@@ -18,7 +18,6 @@ from slicer.config import MeshConfig, load_job
 from slicer.field import FieldResult, compute_field
 from slicer.layers import extract_layers
 from slicer.mesh_io import load_surface
-from slicer.stages import TetMesh
 from slicer.tetrahedralize import tetrahedralize
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
@@ -28,21 +27,17 @@ OPTIMIZE_ITERATIONS = 2
 pytestmark = pytest.mark.slow
 
 
-def _sliced(name: str) -> tuple[TetMesh, FieldResult, list[dict[str, object]]]:
+@pytest.fixture(scope="module", params=["socket", "aorta"])
+def sliced(request: pytest.FixtureRequest) -> tuple[str, FieldResult, list[dict[str, object]]]:
+    """(example name, field result, critical-region report of the layer extraction)."""
+    name = str(request.param)
     job = load_job(EXAMPLES / f"{name}.toml")
     mesh, _ = tetrahedralize(load_surface(EXAMPLES / f"{name}.stl"),
                              MeshConfig(edge_length_mm=EDGE_MM,
                                         optimize_iterations=OPTIMIZE_ITERATIONS))
     res = compute_field(mesh, job.slicing)
     out = extract_layers(mesh, res, job.slicing)
-    return mesh, res, list(out.critical_report)
-
-
-@pytest.fixture(scope="module", params=["socket", "aorta"])
-def sliced(request: pytest.FixtureRequest) -> tuple[str, FieldResult, list[dict[str, object]]]:
-    name = str(request.param)
-    _, res, critical = _sliced(name)
-    return name, res, critical
+    return name, res, list(out.critical_report)
 
 
 def test_layer_height_is_controlled(

@@ -183,3 +183,49 @@ def test_iterative_solvers_reorder_large_systems() -> None:
         x, status = s.solve(b, x0=x_true + 0.01)
         assert status == "ok"
         np.testing.assert_allclose(x, x_true, atol=1e-6)
+
+
+def test_initial_field_is_scalar_harmonic(ring: TetMesh) -> None:
+    # G0: Laplace with g fixed on each region to the region's mean height (min shifted to 0).
+    res = compute_field(ring, _cfg(critical=("bottom", "top")))
+    ops = res.operators
+    bottom, top = res.regions.regions
+    fixed = np.zeros(ops.n_vertices, dtype=bool)
+    fixed[bottom.vertices] = fixed[top.vertices] = True
+    residual = ops.laplacian @ res.g0
+    assert np.abs(residual[~fixed]).max() < 1e-8 * np.abs(residual).max()
+    top_z = ops.vertices[ops.boundary.faces[top.faces], 2].mean(axis=1)
+    area = ops.boundary.area[top.faces]
+    assert res.g0[top.vertices[0]] == pytest.approx(float((top_z * area).sum() / area.sum()))
+    assert np.ptp(res.g0[bottom.vertices]) == 0.0 and res.g0[bottom.vertices[0]] == 0.0
+    # The iteration starts from the harmonic vector field, reported apart.
+    assert res.height_start is not None
+    assert res.trace.height_std[0] == pytest.approx(res.height_initial.std)
+    assert res.height.std <= res.height_start.std * (1 + 1e-9)
+
+
+def test_tets_without_layer_height_carry_no_weight() -> None:
+    # A tet whose vertices all lie on one region has grad g = 0 up to rounding: no height.
+    grad = np.array([[0.0, 0.0, 2.0]] * 9 + [[1e-17, 0.0, 0.0]])
+    vol = np.ones(10)
+    stats = stats_of_gradient(grad, vol, 0.5)
+    assert stats.mean == pytest.approx(0.5) and stats.std < 1e-12 and stats.max == 0.5
+    h, delta = layer_heights(grad, vol, 0.5)
+    assert delta == pytest.approx(1.0) and np.all(np.isfinite(h))
+
+
+def test_fragment_without_region_grows_from_its_bottom() -> None:
+    from tests.slicer.conftest import box_mesh
+
+    a = box_mesh(n=(2, 2, 3), size=(2.0, 2.0, 3.0))
+    # A stray single tet (its one bottom face is below the region size limit): no region.
+    stray = np.array([[6.0, 0.0, 0.0], [7.0, 0.0, 0.0], [6.0, 1.0, 0.0], [6.0, 0.0, 1.0]])
+    verts = np.vstack([a.vertices, stray])
+    tets = np.vstack([a.tets, np.arange(4)[None, :] + len(a.vertices)])
+    res = compute_field(TetMesh(verts, tets), _cfg(critical=("bottom",)))
+    assert len(res.regions.regions) == 1
+    assert res.constrained[-1]
+    for grad in (res.gradient, res.operators.gradient(res.g0)):
+        unit = grad[-1] / np.linalg.norm(grad[-1])
+        np.testing.assert_allclose(unit, [0.0, 0.0, 1.0], atol=1e-6)
+    assert res.height.std < 1e-6 and res.height_initial.std < 1e-6
