@@ -258,19 +258,25 @@ class Launch:
         self.beats[beat.node] = time.monotonic()
 
     def stop(self, grace_s: float = 3.0) -> None:
-        """Stop every process, last started first: SIGTERM, then SIGKILL after ``grace_s``."""
+        """Stop every process: SIGTERM to all (last started first), then SIGKILL to those still
+        running ``grace_s`` later. One shared deadline, so the whole stop takes at most about
+        ``grace_s`` + 2 s however many processes there are."""
         with self._lock:
             self._stopping = True
-        for proc in reversed(self.procs):
-            p = proc.popen
-            if p is not None and p.poll() is None:
-                p.send_signal(signal.SIGTERM)
-                try:
-                    p.wait(grace_s)
-                except subprocess.TimeoutExpired:
-                    p.kill()
-                    p.wait(2.0)
-                self.on_event(f"stopped {proc.spec.name}")
+        running = [proc for proc in reversed(self.procs)
+                   if proc.popen is not None and proc.popen.poll() is None]
+        for proc in running:
+            assert proc.popen is not None
+            proc.popen.send_signal(signal.SIGTERM)
+        deadline = time.monotonic() + grace_s
+        for proc in running:
+            assert proc.popen is not None
+            try:
+                proc.popen.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                proc.popen.kill()
+                proc.popen.wait(2.0)
+            self.on_event(f"stopped {proc.spec.name}")
         if self.bus is not None:
             self.bus.close()
             self.bus = None
