@@ -38,12 +38,15 @@ def test_launch_submit_pause_resume_abort_and_ctrl_c(home: Path, tmp_path: Path,
                                                      capsys: pytest.CaptureFixture[str]) -> None:
     model = tmp_path / "ring.stl"
     model.write_text("solid ring\nendsolid ring\n")
+    # The launcher's stderr goes to a file: an unread pipe would block it once full.
+    err_path = tmp_path / "launcher.err"
+    err_file = err_path.open("wb")
     launcher = subprocess.Popen(
         [sys.executable, "-m", "mesp_cell.cli", "launch", "sim",
          "--set", "slice_fn=tests.mesp_cell.synthetic:slice_job",
          "--set", "plan_fn=tests.mesp_cell.synthetic:plan_job", "--set", "prime_s=0.1"],
         env={**os.environ, "MESP_HOME": str(home)}, stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE)
+        stderr=err_file)
     try:
         run_file = home / "run" / "sim.json"
         wait_for(lambda: run_file.is_file() and (home / "run").exists())
@@ -91,8 +94,14 @@ def test_launch_submit_pause_resume_abort_and_ctrl_c(home: Path, tmp_path: Path,
         client.close()
     finally:
         launcher.send_signal(signal.SIGINT)
-        launcher.wait(20)
-    err = launcher.stderr.read().decode() if launcher.stderr else ""
+        try:
+            launcher.wait(20)
+        except subprocess.TimeoutExpired:
+            launcher.kill()
+            pytest.fail(f"launcher did not stop on Ctrl-C; its stderr:\n{err_path.read_text()}")
+        finally:
+            err_file.close()
+    err = err_path.read_text()
     assert "stopped supervisor" in err and "stopped extruder-emulator" in err
     assert not (home / "run" / "sim.json").exists()
     logs = list((home / "logs" / "sim").glob("*/robot.log"))
