@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
@@ -60,6 +61,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(exc), "read the process log") from exc
     say(f"cell '{spec.cell}' running (bus hub {spec.hub}); logs in {launch.log_dir}; "
         "Ctrl-C stops it")
+    # Ctrl-C and SIGTERM both stop the cell cleanly. Installed explicitly: a process started
+    # in the background by a non-interactive shell inherits SIGINT *ignored*, and Python then
+    # never raises KeyboardInterrupt.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     code = launch.run_forever()
     say("stopped" if code == 0 else f"failed: {launch.failed}")
     return code
