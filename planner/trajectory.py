@@ -8,11 +8,11 @@ from typing import ClassVar
 import numpy as np
 
 from slicer.artifacts import Schema
-from slicer.stages import _Stage
+from slicer.stages import Stage
 
 
 @dataclass(frozen=True, eq=False)
-class Trajectory(_Stage):
+class Trajectory(Stage):
     """Samples of the planned motion, in time order.
 
     Attributes:

@@ -25,8 +25,8 @@ def _frozen(arr: np.ndarray, dtype: type | np.dtype) -> np.ndarray:
     return out
 
 
-class _Stage:
-    """Shared save/load for stage dataclasses; subclasses declare FILE, SCHEMA and DTYPES."""
+class Stage:
+    """Base of the pipeline stages: save/load of the stage file (FILE, SCHEMA, DTYPES)."""
 
     FILE: ClassVar[str]
     SCHEMA: ClassVar[Schema]
@@ -60,7 +60,7 @@ class _Stage:
 
 
 @dataclass(frozen=True, eq=False)
-class TetMesh(_Stage):
+class TetMesh(Stage):
     """A tetrahedral mesh of the solid.
 
     Attributes:
@@ -86,7 +86,7 @@ class TetMesh(_Stage):
 
 
 @dataclass(frozen=True, eq=False)
-class Field(_Stage):
+class Field(Stage):
     """The slicing scalar field and the iso-values of the layers.
 
     Attributes:
@@ -109,7 +109,7 @@ class Field(_Stage):
 
 
 @dataclass(frozen=True, eq=False)
-class Layers(_Stage):
+class Layers(Stage):
     """All curved layers as one triangle soup-with-sharing, tagged per face.
 
     Attributes:
@@ -196,7 +196,7 @@ PATTERN_STRIPE = 1
 
 
 @dataclass(frozen=True, eq=False)
-class Toolpath(_Stage):
+class Toolpath(Stage):
     """Waypoints in print order (design.md, ``toolpath.npz``).
 
     Attributes:
