@@ -6,7 +6,9 @@ stage timings are read back from its report.json. Usage:
     .venv/bin/python bench/run.py [--examples socket aorta ...] [--until layers|toolpath]
                                   [--repeat N] [--out bench/results] [--cache DIR]
 
-Prints one row per example: tets, layers, stage timings (median over repeats), peak memory.
+Prints one row per example: tets, layers, stage timings (median over repeats), peak memory,
+and under it the toolpath quality of the last run (width error per pattern, volume error,
+extrusion starts per layer component).
 With --cache DIR the tet mesh of each example is made once (timed, in DIR/<name>.vtu) and
 the repeats slice that mesh, so fTetWild's minutes are not paid per repeat; its time is in
 the first run's `tetrahedralize` column.
@@ -22,6 +24,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "examples"
@@ -37,7 +40,7 @@ PAPER = {
 
 def run_one(
     name: str, until: str, out: Path, edge: float | None, model: Path | None = None
-) -> dict[str, object]:
+) -> dict[str, Any]:
     """Slice one example in a child process; returns its report plus peak memory (MB)."""
     model = model or next(EXAMPLES.glob(f"{name}.*[lLyY]"))
     job = EXAMPLES / f"{name}.toml"
@@ -69,6 +72,21 @@ def _to_vtu(job_dir: Path, path: Path) -> None:
     write_tet_mesh(TetMesh.load(job_dir), path)
 
 
+def _quality(tp: dict[str, Any]) -> str:
+    """One line of toolpath quality: width error per pattern, volume error, starts."""
+    we = tp["width_error"]
+    parts = [f"{pat} width err p50/p90 {we[pat]['p50']:.3f}/{we[pat]['p90']:.3f}"
+             for pat in ("contour", "stripe")]
+    vol = tp.get("volume_error")
+    parts.append(f"volume err {vol:+.4f}" if isinstance(vol, float) else "volume err -")
+    st = tp.get("extrusion_starts", {})
+    if isinstance(st, dict) and "mean_per_component" in st:
+        parts.append(f"starts/component mean {st['mean_per_component']:.2f} median "
+                     f"{st.get('median_per_component', float('nan')):.1f} max "
+                     f"{st['max_per_component']}")
+    return "; ".join(parts)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--examples", nargs="+", default=list(PAPER))
@@ -83,7 +101,7 @@ def main() -> int:
     header = f"{'model':<10}{'tets':>9}{'layers':>8}" + "".join(f"{s:>15}" for s in stages)
     print(header + f"{'peak MB':>10}{'paper slicing/toolpath s':>26}")
     for name in args.examples:
-        runs = []
+        runs: list[dict[str, Any]] = []
         model = None
         if args.cache is not None:
             model = args.cache / f"{name}.vtu"
@@ -93,23 +111,26 @@ def main() -> int:
                 runs.append(first)
         for _ in range(args.repeat):
             report = run_one(name, args.until, args.out / name, args.edge_length, model)
-            if runs and "tetrahedralize" in runs[0]["timing_s"]:  # type: ignore[operator]
-                report["timing_s"]["tetrahedralize"] = runs[0]["timing_s"]["tetrahedralize"]  # type: ignore[index]
+            if runs and "tetrahedralize" in runs[0]["timing_s"]:
+                report["timing_s"]["tetrahedralize"] = runs[0]["timing_s"]["tetrahedralize"]
             runs.append(report)
         runs = [r for r in runs if "slicing" in r or args.until == "tetmesh"]
         last = runs[-1]
         timing = {
-            s: statistics.median(float(r["timing_s"].get(s, float("nan"))) for r in runs)  # type: ignore[union-attr]
+            s: statistics.median(float(r["timing_s"].get(s, float("nan"))) for r in runs)
             for s in stages
         }
-        peak = max(float(r["bench"]["peak_mb"]) for r in runs)  # type: ignore[index]
+        peak = max(float(r["bench"]["peak_mb"]) for r in runs)
         paper = PAPER.get(name)
         paper_txt = f"{paper[1]:.1f} / {paper[2]:.1f}" if paper else "-"
         print(
-            f"{name:<10}{last['mesh']['tets']:>9}{last.get('slicing', {}).get('layers', '-'):>8}"  # type: ignore[index,union-attr]
+            f"{name:<10}{last['mesh']['tets']:>9}{last.get('slicing', {}).get('layers', '-'):>8}"
             + "".join(f"{timing[s]:>15.2f}" for s in stages)
             + f"{peak:>10.0f}{paper_txt:>26}"
         )
+        tp = last.get("toolpath")
+        if isinstance(tp, dict) and "width_error" in tp:
+            print("  " + _quality(tp))
         (args.out / f"{name}.json").write_text(json.dumps(runs, indent=1))
     return 0
 

@@ -129,8 +129,12 @@ class ToolpathConfig:
     deformation_iterations: int = 6
     volume_tolerance: float = 0.005
     min_path_length_mm: float = 1.0
+    join_factor: float = 3.0
+    fit_bands: bool = True
 
     def __post_init__(self) -> None:
+        if not 1.0 <= self.join_factor <= 20.0:
+            raise ValueError("join_factor must be in [1, 20] (connector length / W)")
         if not 0.02 <= self.waypoint_spacing <= 2.0:
             raise ValueError("waypoint_spacing must be in [0.02, 2] (fraction of W)")
         if self.deformation_iterations < 0:

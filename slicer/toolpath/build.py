@@ -5,9 +5,12 @@ Per layer (in parallel over chunks of layers):
   per connected component of the layer:
     W per vertex from H through the extrusion profile (eq. 4);
     deform the component to constant width (eqs. 13, 14) when W varies by more than 1 %;
-    on the deformed surface: boundary distance, then contours (eq. 9) or stripes (eqs. 10-12)
+    on the deformed surface: boundary distance, then contours or stripes (eqs. 10-12)
       at spacing tau * W_mean, mapped back to the original layer (eqs. 15, 16), short
       fragments dropped, resampled at waypoint_spacing * W, ordered, linked;
+      contours: eq. 9 on a component with one boundary loop (disc-like); on a band between
+      two or more loops (fit_bands) a whole number of lines across the local band width
+      (contours.two_sided_contour_lines), printed from the outer wall inwards;
     tau by bisection until the deposited volume matches the integral of H (volume.py).
   components in nearest-neighbour order, joined by lifted travel moves.
 Layers are concatenated in increasing order, joined by travel moves lifted above the layer
@@ -36,6 +39,7 @@ from __future__ import annotations
 import multiprocessing
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -50,7 +54,6 @@ from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, LayerMesh, Layers, To
 from slicer.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.linking import (
-    EXTRUDE_FACTOR,
     LIFT_FACTOR,
     Lifter,
     LinkedPath,
@@ -79,6 +82,10 @@ DEFORM_SPREAD = 0.01  # relative W spread above which the layer is deformed (eqs
 SERIAL_BELOW = 4  # fewer layers than this are processed in the calling process
 THIN_SHORTFALL = 0.25  # volume error beyond this after matching -> try the thin-band options
 THIN_BAND = 0.6  # max boundary distance below this x W: a band for one line (centre line)
+SHORT_JOIN = 2.0  # join limit (x W) retried where the configured one misses the volume
+SHORT_JOIN_ABOVE = 0.01  # ... by more than this (relative)
+THIN_BAND_FIT = 1.5  # fit_bands: widest band below this x W -> the one centre line
+PITCH_SMOOTHING = 2.0  # contour pitch blended over this x W where the line count changes
 
 
 def layer_pattern(index: int, first: str) -> int:
@@ -154,6 +161,8 @@ class ComponentResult:
         volume_status: status of the bisection; volume_trace: (tau, volume, rel_error) rows.
         deform_status: status of the width deformation ('skipped' when W is constant).
         extrusion_starts: continuous extrusion paths in the component.
+        connector_mm3: deposited volume of the connectors that join lines (included in
+            deposited_mm3, so the volume match accounts for it).
         width_error: (k,) float64, |spacing - W| / W at the line points (deformed method).
         width_error_undeformed: (k',) float64, same, lines computed on the original layer.
         width_error_poisson: (k'',) float64, Poisson alternative (stripe layers), else empty.
@@ -173,6 +182,7 @@ class ComponentResult:
     volume_trace: tuple[tuple[float, float, float], ...]
     deform_status: str
     extrusion_starts: int
+    connector_mm3: float
     width_error: NDArray[np.float64]
     width_error_undeformed: NDArray[np.float64]
     width_error_poisson: NDArray[np.float64]
@@ -251,7 +261,8 @@ def _mean_width(vertices: NDArray[np.float64], faces: NDArray[np.int32],
 class _Surface:
     """What the line generators need of one (possibly deformed) component surface."""
 
-    def __init__(self, vertices: NDArray[np.float64], faces: NDArray[np.int32]) -> None:
+    def __init__(self, vertices: NDArray[np.float64], faces: NDArray[np.int32],
+                 fit_bands: bool = True) -> None:
         from slicer.toolpath.geodesic import boundary_distance
 
         self.vertices = vertices
@@ -259,6 +270,49 @@ class _Surface:
         self.distance = boundary_distance(vertices, faces)
         self.max_distance = float(self.distance.max()) if len(self.distance) else 0.0
         self._direction: NDArray[np.float64] | None = None
+        self.fit_bands = fit_bands
+        self._sides: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
+        self._smoother: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
+
+    def sides(self) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
+        """(n,) distances from the longest boundary loop and from all the others; None for
+        a component with a single loop (disc-like: eq. 9 is right there)."""
+        if self._sides is None:
+            from slicer.toolpath.geodesic import distance_from
+            from slicer.toolpath.surface import boundary_loops
+
+            loops = boundary_loops(self.faces)
+            if len(loops) < 2:
+                return None
+            length = [float(np.linalg.norm(self.vertices[lp] - self.vertices[np.roll(lp, 1)],
+                                           axis=1).sum()) for lp in loops]
+            outer = int(np.argmax(length))
+            inner = np.concatenate([lp for i, lp in enumerate(loops) if i != outer])
+            self._sides = (distance_from(self.vertices, self.faces, loops[outer]),
+                           distance_from(self.vertices, self.faces, inner))
+        return self._sides
+
+    def contour_level(self) -> NDArray[np.float64]:
+        """(n,) mm, the value contours are printed in increasing order of: the distance
+        from the outer loop on a band fitted between two boundaries (outer wall, inwards
+        across the band, inner wall last: consecutive lines are neighbours, so they join),
+        else the distance from the boundary (outside-in)."""
+        sides = self.sides() if self.fit_bands else None
+        return self.distance if sides is None else sides[0]
+
+    def smoother(self, length: float) -> Callable[[NDArray[np.float64]], NDArray[np.float64]]:
+        """u -> (M + t L)^-1 M u, t = length^2: a heat flow over about ``length`` mm
+        (factored once per surface, on the first call)."""
+        if self._smoother is None:
+            import scipy.sparse as sp
+
+            from slicer.toolpath.surface import cotan_laplacian, lumped_mass, spd_solver
+
+            mass = lumped_mass(self.vertices, self.faces)
+            lap = cotan_laplacian(self.vertices, self.faces, robust=True)
+            solve = spd_solver((sp.diags(mass) + length * length * lap).tocsc())
+            self._smoother = lambda u: np.asarray(solve(mass * u))
+        return self._smoother
 
     @property
     def direction(self) -> NDArray[np.float64]:
@@ -307,6 +361,12 @@ class _Surface:
         if pattern == PATTERN_CONTOUR:
             from slicer.toolpath.contours import contour_lines
 
+            sides = self.sides() if self.fit_bands else None
+            if sides is not None:
+                from slicer.toolpath.contours import two_sided_contour_lines
+
+                smooth = self.smoother(PITCH_SMOOTHING * spacing) if PITCH_SMOOTHING > 0 else None
+                return two_sided_contour_lines(self.vertices, self.faces, *sides, spacing, smooth)
             offset = min(0.5 * spacing, 0.5 * self.max_distance)
             return contour_lines(self.vertices, self.faces, self.distance, spacing, offset)
         from slicer.toolpath.stripes import poisson_stripe_lines, stripe_lines
@@ -367,7 +427,8 @@ class _Component:
 
     def build(self, lines_found: SurfaceLines, level_of: NDArray[np.float64] | None,
               spacing: float, start: NDArray[np.float64], lifter: Lifter, lift: float,
-              trim_distance: NDArray[np.float64] | None = None, link: bool = True) -> _Built:
+              trim_distance: NDArray[np.float64] | None = None, link: bool = True,
+              join: float | None = None) -> _Built:
         """Map back, drop short fragments, resample, order, link; values per waypoint.
 
         Args:
@@ -379,6 +440,7 @@ class _Component:
             trim_distance: (n,) boundary distance on the lines' surface: open line ends
                 closer than spacing / 4 to the boundary are cut back by W / 2.
             link: False stops after resampling (lines only: for width measurements).
+            join: connectors up to this x W extrude (default: the config's join_factor).
         """
         lines = map_back(lines_found, self.vertices, self.faces)
         lines = drop_short_lines(lines, self.cfg.min_path_length_mm)
@@ -407,9 +469,10 @@ class _Component:
         level = None
         if level_of is not None:
             level = line_levels(lines, interpolate(level_of, self.faces, lines.face, lines.bary))
-        pieces = order_lines(lines, start, level, spacing, EXTRUDE_FACTOR * w_rs)
+        factor = self.cfg.join_factor if join is None else join
+        pieces = order_lines(lines, start, level, spacing, factor * w_rs)
         linked = link_pieces(lines, pieces, self.vertices, self.faces, self.graph, w_rs,
-                             lifter, lift)
+                             lifter, lift, factor)
         return _Built(lines, linked, self._waypoints(linked))
 
     def _waypoints(self, linked: LinkedPath) -> Waypoints:
@@ -445,7 +508,8 @@ def _component_toolpath(
             waypoints=Waypoints.concat([]), pattern=pattern, n_faces=len(faces),
             required_mm3=required, deposited_mm3=0.0, tau=float("nan"),
             volume_status="failed", volume_trace=(), deform_status="failed",
-            extrusion_starts=0, width_error=np.zeros(0), width_error_undeformed=np.zeros(0),
+            extrusion_starts=0, connector_mm3=0.0, width_error=np.zeros(0),
+            width_error_undeformed=np.zeros(0),
             width_error_poisson=np.zeros(0), error=f"{type(exc).__name__}: {exc}",
         )
 
@@ -475,23 +539,23 @@ def _component_toolpath_unsafe(
     timings["deform"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    surf = _Surface(deformed, comp.faces)
+    surf = _Surface(deformed, comp.faces, cfg.fit_bands)
     timings["distance"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     required = required_volume(comp.vertices, comp.faces, comp.height_sliced)
 
-    def run(surface: _Surface, used: int, tau: float | None = None, poisson: bool = False
-            ) -> VolumeMatch[_Built]:
+    def run(surface: _Surface, used: int, tau: float | None = None, poisson: bool = False,
+            join: float | None = None) -> VolumeMatch[_Built]:
         """Lines of pattern ``used`` on ``surface``, volume-matched; with a fixed ``tau``
         only the lines (no linking: for the baseline width measurements)."""
-        level_of = surface.distance if used == PATTERN_CONTOUR else None
+        level_of = surface.contour_level() if used == PATTERN_CONTOUR else None
         trim_of = surface.distance if used == PATTERN_STRIPE else None
 
         def evaluate(t: float) -> tuple[float, _Built]:
             spacing = t * comp.w_mean
             built = comp.build(surface.lines(used, spacing, poisson), level_of, spacing, start,
-                               lifter, lift, trim_of, link=tau is None)
+                               lifter, lift, trim_of, link=tau is None, join=join)
             return float(built.waypoints.deposited().sum()), built
 
         if tau is not None:
@@ -507,12 +571,24 @@ def _component_toolpath_unsafe(
 
     used = pattern
     fallback = ""
-    centre = surf.centre_lines() if surf.max_distance < THIN_BAND * comp.w_mean else None
+    # contours with fit_bands: a band narrower than 1.5 W everywhere holds round(b / W) = 1
+    # line; the harmonic centre line is that line, and smoother than the medial iso-line of
+    # two distance fields on a band a triangle or two wide
+    thin = 0.5 * THIN_BAND_FIT if cfg.fit_bands and pattern == PATTERN_CONTOUR else THIN_BAND
+    centre = surf.centre_lines() if surf.max_distance < thin * comp.w_mean else None
     if centre is not None and centre.n_lines:
         # A band with holes at most about one width wide holds one line: along its middle.
         match, used, fallback = centre_match(centre), PATTERN_CONTOUR, "centre-line"
     else:
         match = run(surf, used)
+        if abs(match.rel_error) > SHORT_JOIN_ABOVE and cfg.join_factor > SHORT_JOIN:
+            # Longer extruding joins make V(tau) jumpy (a join that flips adds or removes
+            # a whole connector); where the match fails with them, e.g. on narrow bands
+            # whose short lines make connectors a large share of the volume, link with
+            # short joins only and keep whichever matches the volume better.
+            short = run(surf, used, join=SHORT_JOIN)
+            if abs(short.rel_error) < abs(match.rel_error):
+                match = short
     if abs(match.rel_error) > THIN_SHORTFALL and not fallback:
         # A band about one width wide: stripes across it vanish once their ends are cut
         # back by W / 2, contours come out as a doubled loop. Try the other pattern and a
@@ -536,7 +612,7 @@ def _component_toolpath_unsafe(
         if deformed is comp.vertices or fallback == "centre-line":
             b = built  # no deformation (or one line): the direct lines are the lines
         else:
-            b = run(_Surface(comp.vertices, comp.faces), used, match.tau).result
+            b = run(_Surface(comp.vertices, comp.faces, cfg.fit_bands), used, match.tau).result
         err_undeformed = _measure(b.lines, comp.values_at(b.lines.face, b.lines.bary)[2],
                                   comp.normals[b.lines.face])
         if used == PATTERN_STRIPE:
@@ -556,6 +632,7 @@ def _component_toolpath_unsafe(
         volume_trace=tuple((t.tau, t.volume, t.rel_error) for t in match.trace),
         deform_status=deform_status,
         extrusion_starts=built.linked.extrusion_starts,
+        connector_mm3=float(wp.deposited()[built.linked.connector_segments()].sum()),
         width_error=err,
         width_error_undeformed=err_undeformed,
         width_error_poisson=err_poisson,
@@ -818,12 +895,23 @@ def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile)
         "width_error": {k: _pct(v["deformed"]) for k, v in errors.items()},
         "width_error_undeformed": {k: _pct(v["undeformed"]) for k, v in errors.items()},
         "width_error_poisson_stripe": _pct(errors["stripe"]["poisson"]),
+        # diagnostic, not a replacement of width_error: share of points whose nearest other
+        # line is more than 2 W away (a lone line in a band about one width wide measures
+        # its spacing across the part), per pattern
+        "width_error_no_neighbour_fraction": {
+            k: float(np.mean(v["deformed"] > 1.0)) if v["deformed"].size else 0.0
+            for k, v in errors.items()},
         "extrusion_starts": {
             "total": int(sum(starts)),
             "components": len(comps),
             "mean_per_component": float(np.mean(starts)) if starts else 0.0,
+            "median_per_component": float(np.median(starts)) if starts else 0.0,
             "max_per_component": int(max(starts)) if starts else 0,
         },
+        # share of the deposited volume laid by connectors between lines (counted in the
+        # volume match; deposited over or beside neighbouring lines)
+        "connector_volume_fraction": (float(sum(c.connector_mm3 for c in comps)) / deposited
+                                      if deposited > 0 else 0.0),
         "tau": {"min": float(taus.min()) if taus.size else float("nan"),
                 "max": float(taus.max()) if taus.size else float("nan")},
         "component_volume_error": {
@@ -842,7 +930,7 @@ def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile)
     }
     failed = [f"layer {r.index}: {c.error}" for r in results for c in r.components if c.error]
     report["failed_components"] = {"count": len(failed), "reasons": failed[:20]}
-    status = "ok" if set(statuses) <= {"converged"} else "volume"
+    status = "ok" if set(statuses) <= {"converged", "converged-scan"} else "volume"
     if failed:
         status = "failed-components"
     return report, errors, status, timings

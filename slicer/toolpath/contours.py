@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import NDArray
 
 from slicer.errors import InputError
+from slicer.tolerance import tol
 from slicer.toolpath.isolines import iso_lines
-from slicer.toolpath.lines import SurfaceLines, empty_lines
+from slicer.toolpath.lines import SurfaceLines, empty_lines, merge_lines
 from slicer.toolpath.surface import check_mesh
 
 
@@ -46,3 +49,81 @@ def contour_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     if len(levels) == 0:
         return empty_lines()
     return iso_lines(vertices, faces, d, levels)
+
+
+BRANCH_ROOM = 0.4  # a line starts where (band / pitch) exceeds its index by 1/2 + this
+
+
+def band_count(band: NDArray[np.float64], spacing: float) -> NDArray[np.int64]:
+    """(k,) int64, contours that fit across a band ``band`` mm wide: round(band / spacing),
+    at least 1."""
+    return np.maximum(np.rint(np.asarray(band, dtype=np.float64) / spacing), 1).astype(np.int64)
+
+
+def two_sided_contour_lines(
+    vertices: NDArray[np.float64], faces: NDArray[np.integer], d_outer: NDArray[np.float64],
+    d_inner: NDArray[np.float64], spacing: float,
+    smooth: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
+    room: float = BRANCH_ROOM,
+) -> SurfaceLines:
+    """Contours of a band between two boundaries with a whole number of lines across it.
+
+    Eq. 9 from one boundary leaves an arbitrary gap (or an overlap) where the families
+    from the two boundaries meet. Here the local band width b = d_outer + d_inner holds
+    n = round(b / spacing) lines at the even pitch sigma = b / n: floor(n / 2) of them at
+    d_outer = (k + 1/2) sigma, as many at d_inner = (k + 1/2) sigma and, for odd n, one
+    on the medial line d_outer = d_inner; the outermost lines stay half a pitch inside
+    their boundary and the middle has neither gap nor overlap. ``smooth`` (a smoothing
+    operator on per-vertex values, e.g. a short heat flow) blends the pitch between
+    regions of different n, so the lines running through a change of n stay continuous;
+    the count per face is then floor(b / blended pitch + 1/2 - room), and where it
+    changes the line no longer needed ends (a branch point: 4 -> 5 starts a middle line,
+    5 -> 6 splits it in two). ``room`` > 0 lets an extra line start only where it has
+    nearly a full pitch of room: inside a blend the pitch is too wide for the count, and
+    rounding there squeezes the new line against its neighbours (measured on 28 socket
+    contour layers: p90 width error 11.5%, 10.7%, 10.4% with room 0.2, 0.3, 0.4).
+
+    d_outer, d_inner: (n,) float64 mm, distance from the outer loop and from the other
+        loops (``geodesic.distance_from``).
+    spacing: mm, target pitch (tau * W).
+    """
+    check_mesh(vertices, faces)
+    f = np.asarray(faces, dtype=np.int64)
+    da = np.asarray(d_outer, dtype=np.float64)
+    db = np.asarray(d_inner, dtype=np.float64)
+    if da.shape != (len(vertices),) or db.shape != da.shape:
+        raise InputError("two-sided contours need one distance per vertex from each side",
+                         "pass geodesic.distance_from(...) for both sides")
+    if not spacing > 0:
+        raise InputError(f"contour spacing must be positive, got {spacing} mm",
+                         "check the toolpath width")
+    band = da + db
+    pitch = band / band_count(band, spacing)
+    fit = band
+    if smooth is not None:
+        pitch = smooth(pitch)
+        # the count compares like with like: both blended, so it is exactly n inside a
+        # region of n lines whatever the small-scale ripple of the distances
+        fit = smooth(band)
+    pitch = np.maximum(pitch, tol.zero)
+    # lines per face from the blended pitch, so a line appears where its room does
+    n_face = np.maximum(np.floor((fit / pitch)[f].mean(axis=1) + 0.5 - room), 1
+                        ).astype(np.int64)
+    parts: list[SurfaceLines] = []
+    maps: list[NDArray[np.int64]] = []
+
+    def add(values: NDArray[np.float64], level: float, sel: NDArray[np.int64]) -> None:
+        part = iso_lines(vertices, f[sel], values, np.array([level]))
+        if part.n_lines:
+            parts.append(part)
+            maps.append(sel)
+
+    for dist in (da, db):
+        phi = dist / pitch
+        for k in range(int(n_face.max()) // 2):
+            add(phi, k + 0.5, np.flatnonzero(n_face // 2 > k))
+    # an odd count puts its middle line on the medial line d_outer = d_inner
+    odd = np.flatnonzero(n_face % 2 == 1)
+    if odd.size:
+        add(da - db, 0.0, odd)
+    return merge_lines(parts, maps)

@@ -135,3 +135,32 @@ def boundary_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     out = np.zeros(n)
     out[used] = d_local
     return out
+
+
+def distance_from(vertices: NDArray[np.float64], faces: NDArray[np.integer],
+                  sources: NDArray[np.integer], robust: bool = True) -> NDArray[np.float64]:
+    """(n,) float64 mm, heat-method geodesic distance from the vertex set ``sources``.
+
+    Same Dirichlet heat method as ``boundary_distance`` (d = 0 on the sources), with the
+    natural (no-flux) condition on the rest of the boundary: the distance within the
+    layer from, e.g., one boundary loop. Vertices not referenced by any face get 0.
+    """
+    check_mesh(vertices, faces)
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    used, f_local = np.unique(f, return_inverse=True)
+    f_local = f_local.reshape(-1, 3)
+    local = np.full(len(v), -1, dtype=np.int64)
+    local[used] = np.arange(len(used))
+    ids = np.asarray(sources, dtype=np.int64).ravel()
+    ids = ids[(ids >= 0) & (ids < len(v))]
+    src = local[ids]
+    src = np.unique(src[src >= 0])
+    if len(src) == 0:
+        raise InputError("no source vertex lies on the layer component",
+                         "pass vertex ids of the component (e.g. one boundary loop)")
+    d_local = _heat_dirichlet(v[used], f_local, src, robust)
+    d_local[src] = 0.0
+    out = np.zeros(len(v))
+    out[used] = d_local
+    return out

@@ -3,6 +3,9 @@
 Contours (boundary-conformal loops) are printed outside-in: by increasing distance from the
 boundary, so the outer wall that defines the part's shape is laid first and every later loop
 is placed against an already printed neighbour; loops at the same level go nearest-neighbour.
+(``build`` passes the distance from the outer loop as the level of a band fitted between two
+boundaries: outer wall first, then across the band to the inner wall, so that consecutive
+lines are neighbours and join.)
 A closed loop starts at its point nearest to the nozzle. Stripes are printed as a zig-zag:
 greedy nearest neighbour over line ends, each line entered at its nearer end (which flips the
 direction of every other stripe on a regular pattern).

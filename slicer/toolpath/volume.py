@@ -8,7 +8,11 @@ The required volume of a layer component is the integral of the layer height ove
 tau = 1 / tau'), so a larger tau means fewer lines and less volume. ``match_volume`` finds tau
 by a safeguarded bisection: a bracket [lo, hi] with V(lo) > V_req > V(hi) is kept, the next
 trial is the volume-ratio update tau * V / V_req (exact if V is proportional to 1 / tau) when
-it falls inside the bracket, else the bracket's geometric midpoint.
+it falls inside the bracket, else the bracket's geometric midpoint. V(tau) is piecewise
+continuous (a line and its connectors appear or vanish at some tau) and not strictly monotone,
+so when the bisection ends inside a bracket with its best trial off by more than SCAN_ABOVE x
+the tolerance, SCAN_POINTS more trials across it look for a tau within the tolerance (status
+'converged-scan'); the best trial wins.
 """
 
 from __future__ import annotations
@@ -23,6 +27,9 @@ from numpy.typing import NDArray
 T = TypeVar("T")
 
 TAU_LIMITS = (0.5, 2.0)  # spacing factors outside this are not volume matching, they are bugs
+SCAN_POINTS = 12  # extra trials across a bracket the bisection could not close
+SCAN_MARGIN = 0.12  # the scan reaches this far (relative) beyond the bracket
+SCAN_ABOVE = 3.0  # scan only when the best trial is off by more than this x the tolerance
 
 
 def required_volume(
@@ -128,11 +135,16 @@ def match_volume(
     hi: float | None = None  # smallest tau known to give too little
     tau = float(np.clip(tau0, lo_t, hi_t))
     status = "max_iterations"
-    for _ in range(max(1, max_iterations)):
-        volume, payload = evaluate(tau)
+    def trial(t: float) -> tuple[float, float]:
+        """Evaluate tau = t, record it; (volume, relative error)."""
+        volume, payload = evaluate(t)
         err = volume / required - 1.0 if required > 0 else 0.0
-        trials.append(VolumeTrial(tau, float(volume), float(err)))
+        trials.append(VolumeTrial(t, float(volume), float(err)))
         payloads.append(payload)
+        return float(volume), float(err)
+
+    for _ in range(max(1, max_iterations)):
+        volume, err = trial(tau)
         if abs(err) < tolerance:
             status = "converged"
             break
@@ -155,6 +167,17 @@ def match_volume(
             status = "limit"
             break
         tau = guess
+    best_err = min(abs(t.rel_error) for t in trials)
+    if (status in ("max_iterations", "stalled") and lo is not None and hi is not None
+            and best_err > SCAN_ABOVE * tolerance):
+        # V(tau) jumps where a line (and its connectors) appears or vanishes and is not
+        # monotone between jumps: scan the bracket for a tau within the tolerance
+        for tau in np.linspace(min(lo, hi) * (1.0 - SCAN_MARGIN),
+                               max(lo, hi) * (1.0 + SCAN_MARGIN), SCAN_POINTS):
+            _, err = trial(float(np.clip(tau, lo_t, hi_t)))
+            if abs(err) < tolerance:
+                status = "converged-scan"
+                break
     best = int(np.argmin([abs(t.rel_error) for t in trials]))
     chosen = trials[best]
     return VolumeMatch(

@@ -288,3 +288,33 @@ def test_variable_height_on_a_curved_layer_is_deformed() -> None:
     we, wu = res.report["width_error"]["contour"], res.report["width_error_undeformed"]["contour"]
     assert we["p90"] < 0.5 * wu["p90"]
     assert abs(res.report["layer_volume_error"]) < 0.02
+
+
+def test_band_fitting_on_an_annulus_layer() -> None:
+    # a 9.6 mm band with W = 2.33 mm: 4 circles at a 2.4 mm pitch (3 % wide), one path;
+    # eq. 9 leaves a gap between the two families that tau closes by packing every loop
+    # 13 % too tight
+    import dataclasses
+
+    v, f = disc_mesh(16.0, 0.8, inner=6.0)
+    layers = Layers(v, f, np.zeros(len(f), np.int64), np.full(len(v), 0.6),
+                    np.tile([0.0, 0.0, 1.0], (len(v), 1)))
+    reports = []
+    for fit in (True, False):
+        job = JobConfig()
+        job = dataclasses.replace(job, toolpath=dataclasses.replace(job.toolpath, fit_bands=fit))
+        res = compute_toolpath(layers, job, PROFILE, measure_baselines=False, workers=1)
+        reports.append(res.report)
+        assert abs(res.report["layer_volume_error"]) < 0.02
+    fitted, eq9 = reports
+    assert fitted["width_error"]["contour"]["p90"] < 0.05
+    assert fitted["width_error"]["contour"]["p90"] < 0.5 * eq9["width_error"]["contour"]["p90"]
+    assert fitted["extrusion_starts"]["total"] == 1
+
+
+def test_join_factor_is_validated() -> None:
+    from slicer.config import ToolpathConfig
+
+    with pytest.raises(ValueError):
+        ToolpathConfig(join_factor=0.5)
+    assert ToolpathConfig().join_factor >= 2.0

@@ -72,3 +72,85 @@ def test_contour_input_errors() -> None:
     with pytest.raises(InputError):
         contours.contour_lines(v, f, np.zeros(len(v)), 0.0)
     assert contours.contour_lines(v, f, np.zeros(len(v)), 1.0).n_lines == 0
+
+
+def _sides(v: np.ndarray, f: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    from slicer.toolpath.surface import boundary_loops
+
+    loops = boundary_loops(f)
+    length = [np.linalg.norm(v[lp] - v[np.roll(lp, 1)], axis=1).sum() for lp in loops]
+    outer = int(np.argmax(length))
+    inner = np.concatenate([lp for i, lp in enumerate(loops) if i != outer])
+    return geodesic.distance_from(v, f, loops[outer]), geodesic.distance_from(v, f, inner)
+
+
+def test_distance_from_one_loop_of_an_annulus() -> None:
+    v, f = disc(20.0, 0.6, inner=10.0, jitter=0.2)
+    d_out, d_in = _sides(v, f)
+    r = np.linalg.norm(v[:, :2], axis=1)
+    assert np.abs(d_out - (20.0 - r)).max() < 0.2
+    assert np.abs(d_in - (r - 10.0)).max() < 0.2
+    with pytest.raises(InputError):
+        geodesic.distance_from(v, f, np.array([-5]))
+
+
+@pytest.mark.parametrize(("w", "radii"), [(2.3, [11.25, 13.75, 16.25, 18.75]),
+                                          (1.9, [11.0, 13.0, 15.0, 17.0, 19.0])])
+def test_two_sided_contours_fit_a_whole_number_of_circles(w: float, radii: list[float]) -> None:
+    # a 10 mm band holds round(10 / w) circles at the even pitch 10 / n, the outer ones half
+    # a pitch inside their boundary (eq. 9 would leave a 0.8 mm gap at w = 2.3 mm)
+    v, f = disc(20.0, 0.6, inner=10.0, jitter=0.2)
+    lines = contours.two_sided_contour_lines(v, f, *_sides(v, f), w)
+    _check_on_faces(v, f, lines)
+    assert lines.closed.all()
+    rad = [np.linalg.norm(lines.points[lines.line == i, :2], axis=1)
+           for i in range(lines.n_lines)]
+    assert max(float(np.ptp(r)) for r in rad) < 0.1
+    assert np.sort([r.mean() for r in rad]) == pytest.approx(radii, abs=0.05)
+
+
+def _eccentric_annulus() -> tuple[np.ndarray, np.ndarray]:
+    v, f = disc(20.0, 0.6, jitter=0.2)
+    centre = v[f].mean(axis=1)[:, :2]
+    f = f[np.linalg.norm(centre - [4.0, 0.0], axis=1) > 6.0]  # hole r 6 at x = 4
+    used, inv = np.unique(f, return_inverse=True)
+    return v[used], inv.reshape(-1, 3).astype(np.int32)
+
+
+def test_two_sided_contours_branch_where_the_band_widens() -> None:
+    from slicer.toolpath.build import _Surface
+    from slicer.toolpath.width_error import line_spacing
+
+    v, f = _eccentric_annulus()
+    w = 2.45
+    lines = contours.two_sided_contour_lines(v, f, *_sides(v, f), w,
+                                             _Surface(v, f).smoother(2.0 * w))
+    _check_on_faces(v, f, lines)
+    # the band is 10 mm wide at +x and 18 mm at -x: b / w = 4.1 and 7.3, 4 and 7 lines
+    p = lines.points[:, :2]
+    for direction, band, count in ((1.0, 10.0, 4), (-1.0, 18.0, 7)):
+        along = direction * p[:, 0]
+        on_ray = np.abs(p[:, 1]) < 0.3
+        hits = np.sort(along[on_ray & (along > 0)])
+        crossings = hits[np.r_[True, np.diff(hits) > 0.5]]
+        assert len(crossings) == count
+        # (the pitch is blended with the wider band around: within 10 %)
+        assert np.diff(crossings) == pytest.approx(np.full(count - 1, band / count), rel=0.1)
+    spacing = line_spacing(lines.points, lines.line, closed=lines.closed)
+    err = np.abs(spacing - w) / w
+    assert np.percentile(err, 90) < 0.1
+    # eq. 9 on the same band: the families meet with gaps and overlaps along the medial line
+    eq9 = contours.contour_lines(v, f, geodesic.boundary_distance(v, f), w)
+    err9 = np.abs(line_spacing(eq9.points, eq9.line, closed=eq9.closed) - w) / w
+    assert np.percentile(err, 90) < np.percentile(err9, 90)
+    assert np.percentile(err, 95) < 0.5 * np.percentile(err9, 95)
+
+
+def test_two_sided_contour_input_errors() -> None:
+    v, f = disc(20.0, 0.6, inner=10.0)
+    d_out, d_in = _sides(v, f)
+    with pytest.raises(InputError):
+        contours.two_sided_contour_lines(v, f, d_out[:3], d_in, 1.0)
+    with pytest.raises(InputError):
+        contours.two_sided_contour_lines(v, f, d_out, d_in, 0.0)
+    assert contours.band_count(np.array([0.2, 4.4, 4.6]), 1.0).tolist() == [1, 4, 5]

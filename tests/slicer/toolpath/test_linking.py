@@ -163,3 +163,25 @@ def test_zigzag_order_joins_parallel_stripes(disc: tuple[np.ndarray, np.ndarray]
     linked = link_pieces(lines, pieces, v, f, mesh_graph(v, f), np.full(len(lines.points), 1.25),
                          lifter, 0.9)
     assert linked.extrusion_starts == 1
+    # connectors: the 5 U-turns between the 6 stripes, nothing on a line
+    con = linked.connector_segments()
+    on_line = (linked.piece[1:] == linked.piece[:-1]) & (linked.piece[1:] >= 0)
+    assert not np.any(con & on_line)
+    assert np.count_nonzero(con & ~np.r_[con[1:], False]) == 5  # runs of connector segments
+    seg = np.linalg.norm(np.diff(linked.points, axis=0), axis=1)
+    assert seg[con].sum() == pytest.approx(5 * 1.2, rel=0.05)
+
+
+def test_join_factor_decides_what_extrudes(disc: tuple[np.ndarray, np.ndarray]) -> None:
+    v, f = disc
+    lines = _segments(v, f, [-1.5, 1.5], -3.0, 3.0)  # 3 mm apart, W 1.2: 2.5 W
+    lifter = Lifter(v, np.tile([0.0, 0.0, 1.0], (len(v), 1)))
+    starts = []
+    for factor in (2.0, 3.0):
+        pieces = order_lines(lines, np.array([-3.0, -2.0, 0.0]),
+                             reach=np.full(len(lines.points), factor * 1.2))
+        linked = link_pieces(lines, pieces, v, f, mesh_graph(v, f),
+                             np.full(len(lines.points), 1.2), lifter, 0.9, factor)
+        starts.append(linked.extrusion_starts)
+        assert np.all(linked.points[~linked.extrude, 2] >= 0.9 - 1e-9)
+    assert starts == [2, 1]

@@ -75,3 +75,21 @@ def test_match_volume_limit() -> None:
     res = match_volume(lambda t: (10.0 / t, None), required=1000.0, tolerance=1e-3)
     assert res.status == "limit"
     assert res.tau == pytest.approx(0.5)
+
+
+def test_match_volume_scans_a_bracket_it_cannot_close() -> None:
+    # V is not monotone (+8 % below tau 1.005, on target up to 1.04, +4 % up to 1.1) and
+    # jumps to -8 % at 1.1 (a line and its connectors vanish): the bisection closes in on
+    # the jump and stalls, the scan across the bracket finds the plateau
+    def evaluate(tau: float) -> tuple[float, float]:
+        if tau < 1.005:
+            return 108.0, tau
+        if tau <= 1.04:
+            return 100.0, tau
+        return (104.0 if tau < 1.1 else 92.0), tau
+
+    res = match_volume(evaluate, 100.0, 0.005)
+    assert res.status == "converged-scan"
+    assert abs(res.rel_error) < 0.005
+    assert 1.005 <= res.tau <= 1.04
+    assert len(res.trace) > 2
