@@ -9,7 +9,15 @@ Model (paper sections 3.1, 3.2):
 * The ellipse is centred on the nozzle tip, its h_f axis along the printing direction (the
   waypoint ``normal``, projected perpendicular to the motion) and its w_f axis across the motion.
   Each extruding segment sweeps it along the segment (flat ends, so consecutive collinear
-  segments tile without overlap).
+  segments tile without overlap). Why centred: the ink leaves the orifice at the tip into gel
+  the needle has just yielded; the needle body above the tip pushes the ink down, the
+  unyielded gel below the tip pushes it up, and the paper's layer rule H = beta h_f (section
+  3.2) is the symmetric overlap of a filament with the layers above and below it. Neither
+  side is measured for this profile, so ``DepositionConfig.center_offset`` shifts the centre
+  along the printing direction (a fraction of h_f) for sensitivity studies. The consequence
+  of a centred filament 2 H tall (beta = 0.5) on a layer that is the mid-surface of its slab:
+  it sticks out (h_f - H) / 2 wherever nothing covers it (first layer, top layers, exposed
+  treads); ``slicer.toolpath.flush`` moves those waypoints inwards.
 * Silicone and gel do not mix: a voxel holds an ink fraction f in [0, 1], the rest is gel. Each
   segment's volume is shared over the voxels its swept ellipse covers, in proportion to the
   covered part of each voxel (exact along the segment, first-order signed distance across the
@@ -119,6 +127,9 @@ class DepositionConfig:
         gap_mm: float, mm, excess goes first into gaps and grooves of the ink up to about this
             width (free voxels a morphological closing of the ink fills); 0 = nearest free
             voxel only.
+        center_offset: float, shift of the filament centre from the nozzle tip along the
+            printing direction, as a fraction of h_f (0 = centred on the tip; +0.5 = the
+            filament's bottom at the tip).
     """
 
     voxel_mm: float = 0.25
@@ -128,6 +139,7 @@ class DepositionConfig:
     chunk_segments: int = 60_000
     batch_candidates: int = 3_000_000
     gap_mm: float = 1.0
+    center_offset: float = 0.0
 
     def __post_init__(self) -> None:
         if not 0.01 <= self.voxel_mm <= 10.0:
@@ -137,12 +149,16 @@ class DepositionConfig:
             raise ValueError("need pad_mm >= 0 and spread_margin_mm > 0")
         if self.max_passes < 1 or self.chunk_segments < 1 or self.batch_candidates < 1000:
             raise ValueError("max_passes, chunk_segments must be >= 1, batch_candidates >= 1000")
+        if not -0.5 <= self.center_offset <= 0.5:
+            raise InputError(f"filament centre offset {self.center_offset} is out of range",
+                             "use -0.5 to 0.5 (a fraction of the filament height; 0 = centred)")
 
 
 class Segments(NamedTuple):
     """Extruding moves of a toolpath with their filament geometry, in print order.
 
-    start, end: (S, 3) float64, mm, segment end points (nozzle tip).
+    start, end: (S, 3) float64, mm, segment end points of the filament centre line (the nozzle
+        tip, shifted by ``DepositionConfig.center_offset``).
     tangent: (S, 3) float64, unit direction of motion.
     lateral: (S, 3) float64, unit, across the motion (w_f axis) = tangent x normal.
     up: (S, 3) float64, unit, printing direction made perpendicular to the motion (h_f axis).
@@ -169,8 +185,12 @@ class Segments(NamedTuple):
     waypoint: NDArray[np.int64]
 
 
-def extrusion_segments(toolpath: Toolpath, morphology: Morphology) -> Segments:
+def extrusion_segments(toolpath: Toolpath, morphology: Morphology,
+                       center_offset: float = 0.0) -> Segments:
     """The extruding segments of ``toolpath``: consecutive waypoints of one path, both extruding.
+
+    ``center_offset`` (a fraction of h_f) moves the filament centre from the nozzle tip along
+    the printing direction; ``start`` and ``end`` are the filament centre line.
 
     Raises:
         InputError: an extruding waypoint has a non-positive or non-finite speed.
@@ -207,6 +227,9 @@ def extrusion_segments(toolpath: Toolpath, morphology: Morphology) -> Segments:
     # Enforce the area C / v exactly: the morphology fit and the extruder rate must agree,
     # otherwise volume would not be conserved.
     scale = np.sqrt((rate / speed) / (0.25 * np.pi * w * h))
+    if center_offset:
+        lift = (center_offset * h * scale)[:, None] * up
+        p0, p1 = p0 + lift, p1 + lift
     return Segments(
         start=p0, end=p1, tangent=tangent, lateral=lateral, up=up, length=length, speed=speed,
         width=w * scale, height=h * scale, volume=rate * length / speed,
@@ -306,7 +329,7 @@ def deposit(toolpath: Toolpath, morphology: Morphology,
     config = config or DepositionConfig()
     progress = progress or NullProgress()
     t0 = time.perf_counter()
-    seg = extrusion_segments(toolpath, morphology)
+    seg = extrusion_segments(toolpath, morphology, config.center_offset)
     if grid is None:
         box = job_bounds(seg)
         grid = VoxelGrid.around(box[0], box[1], config.voxel_mm, config.pad_mm)
@@ -578,7 +601,7 @@ def covering_grid(toolpath: Toolpath, morphology: Morphology,
         InputError: the grid would be too large for ``config.voxel_mm``.
     """
     config = config or DepositionConfig()
-    box = job_bounds(extrusion_segments(toolpath, morphology))
+    box = job_bounds(extrusion_segments(toolpath, morphology, config.center_offset))
     if extra is not None:
         extra = np.asarray(extra, dtype=np.float64)
         box = np.stack([np.minimum(box[0], extra[0]), np.maximum(box[1], extra[1])])

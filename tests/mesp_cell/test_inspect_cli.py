@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -12,6 +13,7 @@ from mesp_cell.cli import main
 from sim.baseline import PlanarConfig, planar_toolpath
 from sim.deposition import EllipseMorphology
 from slicer.report import read_report
+from slicer.stages import TetMesh
 
 
 @pytest.fixture()
@@ -47,9 +49,18 @@ def test_inspect_writes_report_and_pictures(job: Path, capsys: pytest.CaptureFix
 def test_inspect_with_planar_and_gcode_baselines(job: Path) -> None:
     assert main(["inspect", str(job), "--voxel", "0.5", "--baseline", "planar", "--quiet",
                  "--no-figures"]) == 0
-    base = read_report(job)["inspect"]["baseline"]
+    section = read_report(job)["inspect"]
+    base = section["baseline"]
     assert base["kind"] == "planar" and "surface_error_mm" in base
-    comparison = read_report(job)["inspect"]["comparison"]
+    # Both line width rules are simulated and reported with their beta; the better is kept.
+    modes = section["baselines"]
+    assert set(modes) == {"overlap", "volume"}
+    assert modes["overlap"]["beta"] == pytest.approx(np.sqrt(np.pi) / 2)
+    assert modes["volume"]["width_mode"] == "volume"
+    best = min(m["surface_error_mm"]["mean"] for m in modes.values())
+    assert base["surface_error_mm"]["mean"] == best
+    assert "flush" not in base  # the job has no tet mesh
+    comparison = section["comparison"]
     assert comparison["surface_error_mean_mm"]["paper_planar"] == 0.49
     gcode = job / "part.gcode"
     lines = ["G21", "G90", "M82", "G92 E0"]
@@ -76,6 +87,7 @@ def test_inspect_with_planar_and_gcode_baselines(job: Path) -> None:
         (["inspect", "{job}", "--voxel", "0"], "--voxel"),
         (["inspect", "{job}", "--voxel", "-1"], "--voxel"),
         (["inspect", "{job}", "--gcode", "{missing}"], "does not exist"),
+        (["inspect", "{job}", "--flush"], "tetmesh.npz"),
     ],
 )
 def test_user_mistakes_are_one_line(job: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
@@ -91,6 +103,30 @@ def test_user_mistakes_are_one_line(job: Path, tmp_path: Path, capsys: pytest.Ca
     assert "Traceback" not in err
 
 
+def _box_tetmesh(size: tuple[float, float, float]) -> TetMesh:
+    """The 6 Kuhn tets of the box [0, size], positively oriented."""
+    corners = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)],
+                       dtype=np.float64) * np.asarray(size)
+    tets = []
+    for a, b, _ in itertools.permutations(range(3)):
+        t = [0, 1 << a, (1 << a) | (1 << b), 7]
+        if np.linalg.det(corners[t[1:]] - corners[t[0]]) < 0:
+            t[1], t[2] = t[2], t[1]
+        tets.append(t)
+    return TetMesh(vertices=corners, tets=np.asarray(tets, dtype=np.int32))
+
+
+def test_flush_moves_exposed_waypoints_and_flushes_the_baseline(job: Path) -> None:
+    _box_tetmesh((5.0, 5.0, 3.0)).save(job)
+    assert main(["inspect", str(job), "--voxel", "0.5", "--flush", "--baseline", "planar",
+                 "--baseline-width", "volume", "--quiet", "--no-figures"]) == 0
+    section = read_report(job)["inspect"]
+    # beta 0.7: h_f - H > 0, so the first and last layers stick out and are moved.
+    assert section["flush"]["moved_up"] > 0 and section["flush"]["moved_down"] > 0
+    assert section["baseline"]["flush"]["moved"] > 0
+    assert set(section["baselines"]) == {"volume"}
+
+
 def test_default_voxel_coarsens_for_large_models() -> None:
     from mesp_cell.commands.inspect import AUTO_VOXEL_BUDGET, DEFAULT_VOXEL_MM, _auto_voxel
     from mesp_cell.console import ConsoleProgress
@@ -102,3 +138,13 @@ def test_default_voxel_coarsens_for_large_models() -> None:
     v = _auto_voxel(big, quiet)
     assert v > DEFAULT_VOXEL_MM
     assert np.prod((np.ptp(big, axis=0) + 8.0) / v) <= AUTO_VOXEL_BUDGET
+
+
+def test_flush_is_not_applied_twice(job: Path) -> None:
+    from slicer.report import update_report
+
+    _box_tetmesh((5.0, 5.0, 3.0)).save(job)
+    update_report(job, {"toolpath": {"flush": {"moved": 3}}})  # as mesp slice would record
+    assert main(["inspect", str(job), "--voxel", "0.5", "--flush", "--quiet",
+                 "--no-figures"]) == 0
+    assert "flush" not in read_report(job)["inspect"]

@@ -150,3 +150,26 @@ def test_thin_wall_overlap_over_extrudes_a_solid() -> None:
     q = inspect_deposit(dep, box.vertices, box.faces, tp)
     assert q.over_deposition > 1.5
     assert q.surface.stats()["mean"] > 1.0
+
+
+def test_thin_tube_wall_gets_one_centre_line() -> None:
+    # A tube wall (1.5 mm) thinner than the volume-mode line (W = 1.885 mm): no perimeter fits,
+    # the thin-wall line runs along the middle of the wall and carries W * H per mm.
+    morph = EllipseMorphology(beta=0.5)
+    r1, r2, height = 6.0, 7.5, 3.0
+    tube = trimesh.creation.annulus(r_min=r1, r_max=r2, height=height)
+    tube.apply_translation([0.0, 0.0, 0.5 * height])
+    cfg = PlanarConfig(layer_height_mm=0.6, beta=0.5, width_mode="volume")
+    tp = planar_toolpath(tube.vertices, tube.faces, morph, cfg)
+    w, h = float(tp.width[0]), float(tp.height[0])
+    assert w > r2 - r1
+    r = np.linalg.norm(tp.position[:, :2], axis=1)
+    assert np.all(np.abs(r - 0.5 * (r1 + r2)) < 0.1)
+    assert np.all(tp.pattern == PATTERN_CONTOUR)
+    length = sum(np.linalg.norm(np.diff(tp.position[tp.path == i], axis=0), axis=1).sum()
+                 for i in np.unique(tp.path))
+    assert length * w * h == pytest.approx(tube.volume * w / (r2 - r1), rel=0.05)
+    with pytest.raises(InputError):  # without thin walls there is nothing to print
+        planar_toolpath(tube.vertices, tube.faces, morph,
+                        PlanarConfig(layer_height_mm=0.6, beta=0.5, width_mode="volume",
+                                     thin_walls=False))

@@ -234,3 +234,19 @@ def test_filaments_fuse_only_where_they_overlap() -> None:
         assert dep.deposited_mm3 == pytest.approx(dep.commanded_mm3, rel=1e-5)
     assert mid_fill[False] > 0.99  # overlapping filaments merge into one body
     assert mid_fill[True] == 0.0  # apart, the gel between them stays
+
+
+def test_center_offset_moves_the_filament_along_the_printing_direction() -> None:
+    # +0.5 puts the filament's bottom at the nozzle tip (z = 0); the volume is unchanged.
+    morph = EllipseMorphology(aspect=0.75)
+    speed = 4.0
+    tp = _toolpath([_line(np.zeros(3), np.array([8.0, 0.0, 0.0]))], [0], speed, 0.6, 1.5)
+    dep = deposit(tp, morph, DepositionConfig(voxel_mm=0.1, center_offset=0.5))
+    h_f = float(morph.filament_size(np.array([speed]))[1][0])
+    solid = dep.fill >= 0.5
+    zs = dep.grid.axis_centers(2)[solid.any(axis=(0, 1))]
+    assert zs.min() == pytest.approx(0.0, abs=dep.grid.voxel)
+    assert zs.max() == pytest.approx(h_f, abs=dep.grid.voxel)
+    assert dep.deposited_mm3 == pytest.approx(dep.commanded_mm3, rel=1e-5)
+    with pytest.raises(InputError):
+        DepositionConfig(center_offset=0.8)
