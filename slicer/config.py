@@ -131,6 +131,7 @@ class ToolpathConfig:
     min_path_length_mm: float = 1.0
     join_factor: float = 3.0
     fit_bands: bool = True
+    flush: bool = True
 
     def __post_init__(self) -> None:
         if not 1.0 <= self.join_factor <= 20.0:

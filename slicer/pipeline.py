@@ -81,7 +81,8 @@ def slice_model(
         return _finish(out_dir, report, timer, t0)
 
     with timer.stage("toolpath"):
-        report["toolpath"] = _toolpath(layers, job, out_dir, surface.volume_mm3, progress)
+        report["toolpath"] = _toolpath(tetmesh, layers, job, out_dir, surface.volume_mm3,
+                                       progress)
     return _finish(out_dir, report, timer, t0)
 
 
@@ -172,7 +173,8 @@ def _slice(
 
 
 def _toolpath(
-    layers: Layers, job: JobConfig, out_dir: Path, model_volume: float, progress: Progress | None
+    tetmesh: TetMesh, layers: Layers, job: JobConfig, out_dir: Path, model_volume: float,
+    progress: Progress | None,
 ) -> dict[str, Any]:
     """Toolpath generation, its files, pictures and report section."""
     from slicer.extrusion import load_profile
@@ -182,10 +184,18 @@ def _toolpath(
 
     profile = load_profile(job.extrusion.profile)
     result = compute_toolpath(layers, job, profile, progress=progress)
-    result.toolpath.save(out_dir)
-    export_layers_txt(result.toolpath, out_dir / "layers_txt")
-    write_toolpath_figures(result, layers, out_dir / "figures")
     report = dict(result.report)
+    toolpath = result.toolpath
+    if job.toolpath.flush:
+        from slicer.toolpath.flush import flush_toolpath
+
+        # exposed filaments (first/last layers, treads under a slope) moved inwards so they
+        # do not bulge out of the model; the deposited ink is unchanged
+        toolpath, flushed = flush_toolpath(toolpath, tetmesh, profile)
+        report["flush"] = flushed.as_dict()
+    toolpath.save(out_dir)
+    export_layers_txt(toolpath, out_dir / "layers_txt")
+    write_toolpath_figures(result, layers, out_dir / "figures")
     deposited = float(report["deposited_volume_mm3"])
     report["volume_error"] = deposited / model_volume - 1.0 if model_volume > 0 else float("nan")
     return report

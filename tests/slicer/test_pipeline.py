@@ -1,0 +1,64 @@
+"""The slicing pipeline end to end on a tiny tet mesh: flushing of exposed filaments."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import meshio
+import numpy as np
+import pytest
+
+from slicer.config import load_job
+from slicer.extrusion import load_profile
+from slicer.pipeline import slice_model
+from slicer.stages import Toolpath
+from tests.slicer.conftest import box_mesh
+
+
+@pytest.fixture(scope="module")
+def sliced(tmp_path_factory: pytest.TempPathFactory) -> dict[bool, Path]:
+    """A 16 x 16 x 4 mm planar box sliced with and without flushing."""
+    root = tmp_path_factory.mktemp("pipeline")
+    mesh = box_mesh(n=(8, 8, 2), size=(16.0, 16.0, 4.0))
+    model = root / "box.vtu"
+    meshio.write(model, meshio.Mesh(mesh.vertices, [("tetra", mesh.tets)]))
+    out = {}
+    for flush in (True, False):
+        job = load_job().with_overrides(
+            slicing={"layer_height_mm": 1.0, "critical": ["bottom:10", "top:10"],
+                     "planar": True},
+            toolpath={"flush": flush})
+        out[flush] = root / f"flush_{flush}"
+        slice_model(model, out[flush], job)
+    return out
+
+
+def test_flush_moves_exposed_waypoints_along_their_normal_within_the_bulge(
+        sliced: dict[bool, Path]) -> None:
+    flushed, plain = Toolpath.load(sliced[True]), Toolpath.load(sliced[False])
+    assert len(flushed) == len(plain)
+    move = flushed.position - plain.position
+    dist = np.linalg.norm(move, axis=1)
+    moved = dist > 1e-6
+    assert moved.any()
+    assert not moved[~plain.extrude].any()  # travel moves stay
+    # along the printing direction only, by at most (h_f - H) / 2
+    along = np.einsum("ij,ij->i", move, plain.normal)
+    np.testing.assert_allclose(np.abs(along[moved]), dist[moved], rtol=1e-6, atol=1e-9)
+    _, h_f = load_profile("ecoflex-0030").filament_size(plain.speed[moved])
+    assert np.all(dist[moved] <= 0.5 * (h_f - plain.height[moved]) + 1e-6)
+    # a planar box: only the first layer (moved up) and the last (moved down) are exposed
+    layers = np.unique(plain.layer[moved])
+    assert set(layers.tolist()) <= {int(plain.layer.min()), int(plain.layer.max())}
+    first = plain.layer == plain.layer.min()
+    assert np.all(along[moved & first] > 0) and np.all(along[moved & ~first] < 0)
+    # the ink is unchanged: same speeds, widths and heights
+    np.testing.assert_array_equal(flushed.speed, plain.speed)
+    np.testing.assert_array_equal(flushed.width, plain.width)
+
+
+def test_flush_is_reported_only_when_on(sliced: dict[bool, Path]) -> None:
+    on = json.loads((sliced[True] / "report.json").read_text())["toolpath"]
+    off = json.loads((sliced[False] / "report.json").read_text())["toolpath"]
+    assert on["flush"]["moved"] > 0 and "flush" not in off
