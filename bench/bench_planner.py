@@ -4,9 +4,12 @@
     .venv/bin/python bench/bench_planner.py --n 500000      # a bigger synthetic job
     .venv/bin/python bench/bench_planner.py --shape dome    # curved normals (up to ~15 deg)
     .venv/bin/python bench/bench_planner.py DIR/toolpath.npz  # a real toolpath
+    .venv/bin/python bench/bench_planner.py --toolpath out/socket --toolpath out/hemi  # examples
 
-Prints one JSON object. ``speed_within_5pct`` is the fraction of extruding waypoints whose TCP
-speed on the following step lies within 5 % of the toolpath speed (target: >= 0.99).
+Prints one JSON object per job (``--toolpath`` jobs: one line each, then a Markdown table).
+``speed_within_5pct`` is the fraction of extruding waypoints whose TCP speed on the following
+step lies within 5 % of the toolpath speed (target: >= 0.99); repeated waypoints (zero-length
+steps) have no speed and are left out.
 """
 
 from __future__ import annotations
@@ -31,38 +34,21 @@ from tests.planner import synthetic
 def speed_fidelity(result) -> float:  # type: ignore[no-untyped-def]
     """Fraction of extruding waypoints with TCP speed within 5 % of the toolpath speed."""
     tr = result.trajectory
-    v = np.linalg.norm(np.diff(tr.tcp, axis=0), axis=1) / np.diff(tr.t)
-    target = result.samples.speed[:-1]
-    pick = (tr.waypoint[:-1] >= 0) & tr.extrude[:-1]
+    step = np.linalg.norm(np.diff(tr.tcp, axis=0), axis=1)
+    v = step / np.diff(tr.t)
+    # the toolpath speed varies linearly along a segment: a step's target is its ends' mean
+    target = 0.5 * (result.samples.speed[:-1] + result.samples.speed[1:])
+    pick = (tr.waypoint[:-1] >= 0) & tr.extrude[:-1] & (step > 1e-6)
     return float(np.mean(np.abs(v[pick] / target[pick] - 1.0) <= 0.05)) if pick.any() else 1.0
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("toolpath", nargs="?", type=Path, help="a toolpath.npz (or its job dir)")
-    ap.add_argument("--n", type=int, default=120_000, help="synthetic waypoints (default 120k)")
-    ap.add_argument("--cell", type=Path, help="cell TOML")
-    ap.add_argument("--shape", choices=["spiral", "dome"], default="spiral",
-                    help="synthetic job: stacked spiral (flat layers) or curved dome patch")
-    args = ap.parse_args()
-    cell = load_cell(args.cell)
-    if args.toolpath is not None:
-        d = args.toolpath if args.toolpath.is_dir() else args.toolpath.parent
-        tp = Toolpath.load(d)
-        source = str(args.toolpath)
-    else:
-        if args.shape == "dome":
-            tp = synthetic.big_dome(args.n)
-            source = f"synthetic curved dome patch, {len(tp)} waypoints"
-        else:
-            tp = synthetic.big(args.n)
-            source = f"synthetic stacked spiral, {len(tp)} waypoints"
+def run_one(tp: Toolpath, cell, source: str) -> dict:  # type: ignore[no-untyped-def]
+    """Plan ``tp`` once and collect the benchmark numbers."""
     wall, cpu = time.perf_counter(), time.process_time()
     result = plan(tp, cell)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     rep = result.report
-    out = {
+    return {
         "source": source,
         "waypoints": len(tp),
         "samples": len(result.trajectory),
@@ -75,11 +61,69 @@ def main() -> int:
         "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
         "status": rep["status"],
         "min_clearance_mm": rep["min_clearance_mm"],
+        "min_clearance_pair": rep["min_clearance_pair"],
+        "alpha_deg": [round(rep["alpha_deg"]["min"], 1), round(rep["alpha_deg"]["max"], 1)]
+        if "min" in rep["alpha_deg"] else None,
+        "lean_deg": [round(rep["lean_deg"]["min"], 1), round(rep["lean_deg"]["max"], 1)]
+        if "min" in rep["lean_deg"] else None,
+        "tilted_samples": rep["alpha_deg"]["tilted_samples"],
+        "leaned_samples": rep["lean_deg"]["leaned_samples"],
         "unreachable": rep["unreachable"]["count"],
+        "unreachable_by_reason": rep["unreachable"]["by_reason"],
+        "unreachable_between_waypoints": rep["unreachable"]["between_waypoints"],
+        "normals_repaired": rep["normals_repaired"],
+        "gel_fill_mm": rep["gel_fill_mm"],
+        "placement": rep["placement"],
         "over_deposition": rep["over_deposition"],
         "duration_s": rep["duration_s"],
     }
-    print(json.dumps(out, indent=1))
+
+
+def table(rows: list[dict]) -> str:
+    """The per-example Markdown table."""
+    head = ("| job | waypoints | plan s | wp/s | duration h | speed within 5% | "
+            "min clearance mm | alpha deg | lean deg | unreachable (reasons) |")
+    out = [head, "|" + " --- |" * 10]
+    for r in rows:
+        reasons = ", ".join(f"{k}: {v}" for k, v in r["unreachable_by_reason"].items())
+        out.append(
+            f"| {Path(r['source']).name} | {r['waypoints']} | {r['wall_s']:.1f} | "
+            f"{r['waypoints_per_s_wall']} | {r['duration_s'] / 3600:.2f} | "
+            f"{100 * r['speed_within_5pct']:.2f}% | {r['min_clearance_mm']:.1f} | "
+            f"{r['alpha_deg']} | {r['lean_deg']} | {r['unreachable']}"
+            + (f" ({reasons})" if reasons else "") + " |")
+    return "\n".join(out)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("toolpath", nargs="?", type=Path, help="a toolpath.npz (or its job dir)")
+    ap.add_argument("--toolpath", dest="jobs", action="append", type=Path, default=[],
+                    metavar="DIR", help="a sliced job (dir or toolpath.npz); repeatable")
+    ap.add_argument("--n", type=int, default=120_000, help="synthetic waypoints (default 120k)")
+    ap.add_argument("--cell", type=Path, help="cell TOML")
+    ap.add_argument("--shape", choices=["spiral", "dome"], default="spiral",
+                    help="synthetic job: stacked spiral (flat layers) or curved dome patch")
+    args = ap.parse_args()
+    cell = load_cell(args.cell)
+    jobs = list(args.jobs) + ([args.toolpath] if args.toolpath is not None else [])
+    if jobs:
+        rows = []
+        for job in jobs:
+            d = job if job.is_dir() else job.parent
+            rows.append(run_one(Toolpath.load(d), cell, str(d)))
+            print(json.dumps(rows[-1]), flush=True)
+        if len(rows) > 1:
+            print(table(rows))
+        return 0
+    if args.shape == "dome":
+        tp = synthetic.big_dome(args.n)
+        source = f"synthetic curved dome patch, {len(tp)} waypoints"
+    else:
+        tp = synthetic.big(args.n)
+        source = f"synthetic stacked spiral, {len(tp)} waypoints"
+    print(json.dumps(run_one(tp, cell, source), indent=1))
     return 0
 
 

@@ -52,7 +52,7 @@ class RobotConfig:
 
     base_xyz_mm: Vec3 = (0.0, 0.0, 0.0)
     base_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
-    home_deg: tuple[float, ...] = (180.0, -100.0, 100.0, -90.0, -90.0, 0.0)
+    home_deg: tuple[float, ...] = (161.94, -81.17, 29.63, -38.45, -90.0, -18.06)
     joint_min_deg: tuple[float, ...] = (-360.0,) * 6
     joint_max_deg: tuple[float, ...] = (360.0,) * 6
     max_velocity_deg_s: tuple[float, ...] = (180.0,) * 6
@@ -110,9 +110,9 @@ class ToolPart:
 class ToolConfig:
     """Flange-to-nozzle-tip transform, the nozzle shaft and the holder/extruder parts."""
 
-    tip_xyz_mm: Vec3 = (0.0, 0.0, 290.0)
+    tip_xyz_mm: Vec3 = (0.0, 0.0, 460.0)
     tip_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
-    nozzle_length_mm: float = 140.0
+    nozzle_length_mm: float = 300.0
     nozzle_diameter_mm: float = 2.0
     parts: tuple[ToolPart, ...] = ()
 
@@ -146,13 +146,20 @@ class TableConfig:
 
 @dataclass(frozen=True)
 class TankConfig:
-    """The gel tank: inner box, wall thickness (also the floor's), pose and gel fill height."""
+    """The gel tank: inner box, wall thickness (also the floor's), pose and gel fill height.
+
+    ``gel_fill_mm`` is the highest fill; with ``fit_gel`` a job fills the tank only to
+    ``gel_cover_mm`` above the top of its part (a short part then leaves the extruder body
+    far above the gel), see ``planner.placement.fit_gel``.
+    """
 
     floor_center_mm: Vec3 = (480.0, 0.0, 8.0)
     yaw_deg: float = 0.0
-    inner_size_mm: Vec3 = (300.0, 300.0, 150.0)
+    inner_size_mm: Vec3 = (500.0, 500.0, 260.0)
     wall_mm: float = 8.0
-    gel_fill_mm: float = 100.0
+    gel_fill_mm: float = 240.0
+    fit_gel: bool = True
+    gel_cover_mm: float = 15.0
 
     def __post_init__(self) -> None:
         _vec(self.floor_center_mm, 3, "floor_center_mm")
@@ -161,6 +168,8 @@ class TankConfig:
             raise ValueError("inner_size_mm and wall_mm must be positive")
         if not 0 < self.gel_fill_mm <= self.inner_size_mm[2]:
             raise ValueError("gel_fill_mm must lie in (0, inner height]")
+        if self.gel_cover_mm < 0:
+            raise ValueError("gel_cover_mm must be >= 0")
 
     @property
     def floor_T(self) -> np.ndarray:
@@ -193,6 +202,9 @@ class PlanningConfig:
 
     alpha_min_deg: float = 70.0
     alpha_max_deg: float = 110.0
+    lean_max_deg: float = 30.0
+    smooth_waypoints: int = 2
+    smooth_max_deg: float = 8.0
     clearance_mm: float = 3.0
     joint_margin_deg: float = 5.0
     singular_margin: float = 0.05
@@ -200,11 +212,17 @@ class PlanningConfig:
     spin_steps: int = 24
     max_step_mm: float = 2.0
     travel_speed_mm_s: float = 40.0
+    transfer_speed_mm_s: float = 250.0
+    approach_above_gel_mm: float = 30.0
     extrusion_rate_mm3_s: float = 6.57
 
     def __post_init__(self) -> None:
         if not 0 <= self.alpha_min_deg <= 90 <= self.alpha_max_deg <= 180:
             raise ValueError("need 0 <= alpha_min_deg <= 90 <= alpha_max_deg <= 180")
+        if not 0 <= self.lean_max_deg <= 60:
+            raise ValueError("lean_max_deg must lie in [0, 60]")
+        if self.smooth_waypoints < 0 or not 0 <= self.smooth_max_deg <= 20:
+            raise ValueError("need smooth_waypoints >= 0 and smooth_max_deg in [0, 20]")
         if self.clearance_mm < 0 or self.joint_margin_deg < 0:
             raise ValueError("clearance_mm and joint_margin_deg must be >= 0")
         if self.singular_margin <= 0 or self.damping < 0:
@@ -213,6 +231,8 @@ class PlanningConfig:
             raise ValueError("spin_steps must be at least 4")
         if self.max_step_mm <= 0 or self.travel_speed_mm_s <= 0:
             raise ValueError("max_step_mm and travel_speed_mm_s must be positive")
+        if self.approach_above_gel_mm <= 0 or self.transfer_speed_mm_s <= 0:
+            raise ValueError("approach_above_gel_mm and transfer_speed_mm_s must be positive")
         if self.extrusion_rate_mm3_s <= 0:
             raise ValueError("extrusion_rate_mm3_s must be positive")
 

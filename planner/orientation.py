@@ -1,12 +1,17 @@
-"""Nozzle orientation per sample: axis along -normal, spin free, tilt within [alpha_min, alpha_max].
+"""Nozzle orientation per sample: axis along -normal, spin free, tilt and lean where needed.
 
 The nozzle axis (tool z, out of the tip) is ``-normal`` at alpha = 90 deg; alpha is the angle
 between the axis and the direction of motion. Rotation ``psi`` about the axis is the free
-redundancy of the 6-axis arm. ``Reach`` checks a batch of tool poses (IK on the home branch,
-joint limits with margin, singularity, clearance); ``choose`` picks psi by dynamic programming
-over a subsample (margins as cost, smooth spin), then tilts the axis in the plane of normal
-and motion (changing alpha) only where a sample fails, with the smallest tilt that keeps alpha
-in range, ramping the tilt in and out. Positions here are mm, angles rad.
+redundancy of the 6-axis arm. Two rotations move the axis off ``-normal`` where limits,
+singularities or collisions demand it: a *tilt* in the plane of normal and motion (it changes
+alpha, so it is bounded by [alpha_min, alpha_max]) and a *lean* about the direction of motion
+(it keeps alpha, bounded by ``lean_max_deg``); on steep layer regions the lean swings the
+holder and extruder body back over the part, out of the gel and away from the tank walls.
+``Reach`` checks a batch of tool poses (IK on the home branch, joint limits with margin,
+singularity, clearance); ``choose`` picks psi by dynamic programming over a subsample
+(margins as cost, smooth spin), then, only where a sample fails, the (tilt, lean) pair with
+the smallest deviation from ``-normal`` (a lean before a tilt of the same size), ramping
+both in and out at 1 deg per sample. Positions here are mm, angles rad.
 """
 
 from __future__ import annotations
@@ -42,18 +47,27 @@ def any_perpendicular(n: np.ndarray) -> np.ndarray:
     return unit(np.cross(n, ref))
 
 
-def nozzle_axis(normal: np.ndarray, tangent: np.ndarray, tilt: np.ndarray) -> np.ndarray:
-    """Nozzle axis (N, 3) unit: ``-normal`` leaned by ``tilt`` (N,) rad towards the motion.
+def nozzle_axis(normal: np.ndarray, tangent: np.ndarray, tilt: np.ndarray,
+                lean: np.ndarray | None = None) -> np.ndarray:
+    """Nozzle axis (N, 3) unit: ``-normal`` tilted by ``tilt`` and leaned by ``lean`` (N,) rad.
 
-    The axis turns in the plane of the normal and the motion direction:
-    axis = -cos(tilt) n + sin(tilt) t_perp, t_perp the unit part of the tangent perpendicular
-    to n. The printing angle is then alpha = alpha0 - tilt with alpha0 = angle(-n, t) (90 deg
-    when the motion lies in the layer).
+    With t the unit part of the tangent perpendicular to n and b = n x t:
+    axis = -cos(tilt) cos(lean) n + sin(tilt) t + cos(tilt) sin(lean) b.
+    The tilt turns the axis in the plane of the normal and the motion: alpha = alpha0 - tilt,
+    alpha0 = angle(-n, t) (90 deg when the motion lies in the layer). The lean turns it about
+    the motion direction and leaves alpha unchanged for motion in the layer. The deviation
+    from ``-normal`` is arccos(cos(tilt) cos(lean)).
     """
     t = tangent - np.einsum("ni,ni->n", tangent, normal)[:, None] * normal
     bad = np.linalg.norm(t, axis=1) < 1e-9
     t = np.where(bad[:, None], any_perpendicular(normal), unit(t))
-    return unit(-np.cos(tilt)[:, None] * normal + np.sin(tilt)[:, None] * t)
+    ct = np.cos(tilt)[:, None]
+    axis = -ct * normal + np.sin(tilt)[:, None] * t
+    if lean is not None:
+        b = np.cross(normal, t)
+        axis = -ct * np.cos(lean)[:, None] * normal + np.sin(tilt)[:, None] * t \
+            + ct * np.sin(lean)[:, None] * b
+    return unit(axis)
 
 
 def alpha_of(axis: np.ndarray, tangent: np.ndarray) -> np.ndarray:
@@ -185,8 +199,9 @@ class Orientation:
         q: (M, 6) float64, rad, continuous along the job (nan where no IK solution at all).
         axis: (M, 3) float64, unit nozzle axis in the base frame.
         psi: (M,) float64, rad, spin about the axis (unwrapped).
-        tilt: (M,) float64, rad, lean of the axis from -normal towards the motion
+        tilt: (M,) float64, rad, turn of the axis from -normal towards the motion
             (alpha = alpha0 - tilt, see ``nozzle_axis``).
+        lean: (M,) float64, rad, turn of the axis about the motion direction (keeps alpha).
         status: (M,) int8, OK or the reason the sample is not reachable within limits.
         pair: (M,) int32, closest collision pair where clearance was computed, else -1.
         clearance: (M,) float64, mm, clearance where computed (every few samples and densely
@@ -197,6 +212,7 @@ class Orientation:
     axis: np.ndarray
     psi: np.ndarray
     tilt: np.ndarray
+    lean: np.ndarray
     status: np.ndarray
     pair: np.ndarray
     clearance: np.ndarray
@@ -213,6 +229,24 @@ def tilt_levels(cell: CellConfig, alpha0: np.ndarray, step_deg: float = 5.0) -> 
     k = np.union1d(k, [0.0])
     order = np.lexsort((-k, np.abs(k)))  # by size, positive first
     return np.radians(k[order])
+
+
+def orientation_levels(cell: CellConfig, alpha0: np.ndarray, tilt_step_deg: float = 5.0,
+                       lean_step_deg: float = 5.0) -> np.ndarray:
+    """(tilt, lean) pairs (L, 2) rad to try, by deviation from -normal, smallest first.
+
+    Tilts as ``tilt_levels``; leans from -lean_max_deg to lean_max_deg. Among pairs of equal
+    deviation a pure lean comes first (it keeps alpha at alpha0), then positive before negative.
+    """
+    tilts = np.degrees(tilt_levels(cell, alpha0, tilt_step_deg))
+    lmax = cell.planning.lean_max_deg
+    n = int(np.floor(lmax / lean_step_deg + 1e-9))
+    leans = np.union1d(np.arange(-n, n + 1) * lean_step_deg, [0.0])
+    T, L = np.meshgrid(tilts, leans, indexing="ij")
+    T, L = T.ravel(), L.ravel()
+    dev = np.degrees(np.arccos(np.cos(np.radians(T)) * np.cos(np.radians(L))))
+    order = np.lexsort((-L, -T, np.abs(T), np.round(dev, 6)))
+    return np.radians(np.stack([T[order], L[order]], axis=1))
 
 
 def alpha_allowed(cell: CellConfig, alpha: np.ndarray, extrude: np.ndarray) -> np.ndarray:
@@ -240,6 +274,9 @@ def _viterbi(cost: np.ndarray, grid: np.ndarray, weight: float) -> np.ndarray:
     return path
 
 
+REPAIR_ROUNDS = 4  # repair, ramp, re-check: a ramp may break a neighbour, so repeat
+
+
 def _ramp(dev: np.ndarray, per_sample: float) -> np.ndarray:
     """Spread deviations so they ramp in and out at ``per_sample`` rad per sample."""
     width = int(min(np.ceil(np.abs(dev).max() / per_sample), 2000)) if dev.size else 0
@@ -261,7 +298,7 @@ def choose(
     coarse: int = 600,
     clearance_stride: int = 4,
 ) -> Orientation:
-    """Pick spin and tilt for every sample (see module docstring).
+    """Pick spin, tilt and lean for every sample (see module docstring).
 
     Args:
         tcp: (M, 3) float64, mm, nozzle tip targets in the base frame.
@@ -277,42 +314,46 @@ def choose(
     K = cell.planning.spin_steps
     grid = np.linspace(-np.pi, np.pi, K, endpoint=False)
     alpha0 = alpha_of(-normal, tangent)
-    levels = tilt_levels(cell, alpha0)
+    levels = orientation_levels(cell, alpha0)
+    w_tilt, w_lean = np.radians(20.0), np.radians(28.0)  # a lean costs less than a tilt
 
-    # 1. coarse spin search on a subsample, alpha tilted only where needed
+    # 1. coarse spin search on a subsample, the axis moved off -normal only where needed
     sub = np.unique(np.append(np.linspace(0, M - 1, min(M, coarse)).round().astype(int), M - 1))
     S = len(sub)
     cost = np.full((S, K), np.inf)
-    dev = np.zeros((S, K))
-    for level in levels:
+    dev = np.zeros((S, K, 2))
+    for tilt_l, lean_l in levels:
         todo = np.flatnonzero(~np.isfinite(cost).any(axis=1))
         if not len(todo):
             break
         idx = sub[todo]
-        ax = nozzle_axis(normal[idx], tangent[idx], np.full(len(idx), level))
+        ax = nozzle_axis(normal[idx], tangent[idx], np.full(len(idx), tilt_l),
+                         np.full(len(idx), lean_l))
         ax_r = np.repeat(ax, K, axis=0)
         psi = np.tile(grid, len(idx))
         R = tool_rotation(ax_r, psi)
         q = reach.solve(np.repeat(tcp[idx], K, axis=0), R, reach.home)
         ev = reach.check(q, iters=8)
-        c = reach.cost(ev).reshape(len(idx), K) + (level / np.radians(20.0)) ** 2
-        allowed = alpha_allowed(cell, alpha0[idx] - level, extrude[idx])
+        c = reach.cost(ev).reshape(len(idx), K) + (tilt_l / w_tilt) ** 2 + (lean_l / w_lean) ** 2
+        allowed = alpha_allowed(cell, alpha_of(ax, tangent[idx]), extrude[idx])
         c[~allowed] = np.inf
         cost[todo] = c
-        dev[todo] = level
+        dev[todo] = (tilt_l, lean_l)
     path = _viterbi(cost, grid, weight=10.0)
     psi_sub = np.unwrap(grid[path])
     dev_sub = dev[np.arange(S), path]
     psi = np.interp(np.arange(M), sub, psi_sub)
-    # ramp tilts in and out (1 deg per sample) instead of stepping between levels
-    tilt = _ramp(np.interp(np.arange(M), sub, dev_sub), np.radians(1.0))
+    # ramp tilts and leans in and out (1 deg per sample) instead of stepping between levels
+    per_sample = np.radians(1.0)
+    tilt = _ramp(np.interp(np.arange(M), sub, dev_sub[:, 0]), per_sample)
+    lean = _ramp(np.interp(np.arange(M), sub, dev_sub[:, 1]), per_sample)
     lo_a, hi_a = np.radians([cell.planning.alpha_min_deg, cell.planning.alpha_max_deg])
     tilt = np.where(extrude, np.clip(tilt, alpha0 - hi_a, alpha0 - lo_a), tilt)
 
     # 2. full resolution, then repair failing samples with the smallest change
-    def evaluate(rows: np.ndarray, psi_r: np.ndarray, dev_r: np.ndarray, q_ref: np.ndarray,
-                 stride: int) -> tuple[np.ndarray, Evaluation, np.ndarray]:
-        ax = nozzle_axis(normal[rows], tangent[rows], dev_r)
+    def evaluate(rows: np.ndarray, psi_r: np.ndarray, tilt_r: np.ndarray, lean_r: np.ndarray,
+                 q_ref: np.ndarray, stride: int) -> tuple[np.ndarray, Evaluation, np.ndarray]:
+        ax = nozzle_axis(normal[rows], tangent[rows], tilt_r, lean_r)
         q = reach.solve(tcp[rows], tool_rotation(ax, psi_r), q_ref)
         ev = reach.check(q, clearance=False)
         clear = np.full(len(rows), np.nan)
@@ -336,56 +377,68 @@ def choose(
         status = ev.status.copy()
         hit = has & (np.nan_to_num(clear, nan=np.inf) < cell.planning.clearance_mm)
         status[hit & (status == OK)] = COLLISION
-        off = ~alpha_allowed(cell, alpha0[rows] - dev_r, extrude[rows])
+        off = ~alpha_allowed(cell, alpha_of(ax, tangent[rows]), extrude[rows])
         status[off & (status == OK)] = ALPHA
         ev = Evaluation(q, status, ev.singular, clear, ev.margin, pair)
         return q, ev, ax
 
     q_ref = _continuous_reference(reach, M)
-    q, ev, axis = evaluate(np.arange(M), psi, tilt, q_ref, clearance_stride)
+    q, ev, axis = evaluate(np.arange(M), psi, tilt, lean, q_ref, clearance_stride)
     status = ev.status.copy()
     pair = ev.pair.copy()
     clearance = ev.clearance.copy()
-    bad = np.flatnonzero(status != OK)
-    if len(bad):
-        new_psi, new_dev = psi.copy(), tilt.copy()
-        spins = np.radians([0.0, 15.0, -15.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0])
+    spins = np.radians([0.0, 15.0, -15.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0])
+    # a repair ramps into its neighbours, which may fail in turn: repeat a few rounds
+    for round_ in range(REPAIR_ROUNDS):
+        bad = np.flatnonzero(status != OK)
+        if not len(bad):
+            break
+        new_psi, new_tilt, new_lean = psi.copy(), tilt.copy(), lean.copy()
         fixed = np.zeros(M, dtype=bool)
-        for level in levels:
+        for tilt_l, lean_l in levels:
             for spin in spins:
                 rows = bad[~fixed[bad]]
-                if not len(rows) or (level == 0.0 and spin == 0.0):
-                    continue
-                trial_dev = np.full(len(rows), level)
-                _, e2, _ = evaluate(rows, psi[rows] + spin, trial_dev, reach.home, 1)
+                if not len(rows):
+                    break
+                t_r, l_r = np.full(len(rows), tilt_l), np.full(len(rows), lean_l)
+                _, e2, _ = evaluate(rows, psi[rows] + spin, t_r, l_r, reach.home, 1)
                 good = e2.status == OK
                 new_psi[rows[good]] = psi[rows[good]] + spin
-                new_dev[rows[good]] = level
+                new_tilt[rows[good]] = tilt_l
+                new_lean[rows[good]] = lean_l
                 fixed[rows[good]] = True
-        # ramp the changes in and out so the wrist does not jump, then re-check what changed
-        per_sample = np.radians(1.0)
-        old_psi, old_tilt = psi, tilt
-        psi = psi + _ramp(new_psi - psi, per_sample)
-        tilt = tilt + _ramp(new_dev - tilt, per_sample)
+        if not fixed.any():
+            break
+        # ramp the changes in and out so the wrist does not jump, then re-check what changed;
+        # the last round sets the repairs without a ramp (where the motion direction turns
+        # sharply, a ramp in tilt and lean can break the neighbours again and again)
+        old_psi, old_tilt, old_lean = psi, tilt, lean
+        if round_ == REPAIR_ROUNDS - 1:
+            psi, tilt, lean = new_psi, new_tilt, new_lean
+        else:
+            psi = psi + _ramp(new_psi - psi, per_sample)
+            tilt = tilt + _ramp(new_tilt - tilt, per_sample)
+            lean = lean + _ramp(new_lean - lean, per_sample)
         # keep extruding samples' alpha in range: alpha = alpha0 - tilt
-        lo, hi = np.radians([cell.planning.alpha_min_deg, cell.planning.alpha_max_deg])
-        tilt = np.where(extrude, np.clip(tilt, alpha0 - hi, alpha0 - lo), tilt)
+        tilt = np.where(extrude, np.clip(tilt, alpha0 - hi_a, alpha0 - lo_a), tilt)
         changed = np.flatnonzero((np.abs(psi - old_psi) > 1e-12)
-                                 | (np.abs(tilt - old_tilt) > 1e-12))
+                                 | (np.abs(tilt - old_tilt) > 1e-12)
+                                 | (np.abs(lean - old_lean) > 1e-12))
         if len(changed):
-            q_c, ev_c, ax_c = evaluate(changed, psi[changed], tilt[changed], q_ref[changed],
-                                       clearance_stride)
+            q_c, ev_c, ax_c = evaluate(changed, psi[changed], tilt[changed], lean[changed],
+                                       q_ref[changed], 1)
             q[changed], axis[changed] = q_c, ax_c
             status[changed], pair[changed] = ev_c.status, ev_c.pair
             clearance[changed] = ev_c.clearance
-        # samples still failing keep the best candidate found, if any
+        # samples still failing take the candidate found for them, if any
         still = np.flatnonzero((status != OK) & fixed)
         if len(still):
-            q2, e3, ax3 = evaluate(still, new_psi[still], new_dev[still], reach.home, 1)
+            q2, e3, ax3 = evaluate(still, new_psi[still], new_tilt[still], new_lean[still],
+                                   reach.home, 1)
             good = e3.status == OK
             rows = still[good]
             q[rows], axis[rows] = q2[good], ax3[good]
-            psi[rows], tilt[rows] = new_psi[rows], new_dev[rows]
+            psi[rows], tilt[rows], lean[rows] = new_psi[rows], new_tilt[rows], new_lean[rows]
             status[rows] = OK
             pair[rows], clearance[rows] = e3.pair[good], e3.clearance[good]
     q = _make_continuous(q, reach.home, reach.lo, reach.hi)
@@ -393,7 +446,7 @@ def choose(
     status[lim_bad] = JOINT_LIMIT
     off = ~alpha_allowed(cell, alpha_of(axis, tangent), extrude) & (status == OK)
     status[off] = ALPHA
-    return Orientation(q, axis, psi, tilt, status, pair, clearance)
+    return Orientation(q, axis, psi, tilt, lean, status, pair, clearance)
 
 
 def _continuous_reference(reach: Reach, M: int) -> np.ndarray:
@@ -410,9 +463,11 @@ def _make_continuous(q: np.ndarray, home: np.ndarray, lo: np.ndarray,
     if not has.any():
         return q
     idx = np.arange(len(q))
+    # unwrap the solved rows first, then fill the gaps: interpolating wrapped angles across
+    # a gap would sweep a joint through a whole turn
+    q_has = np.unwrap(q[has], axis=0)
     for j in range(6):  # six joints
-        q[:, j] = np.interp(idx, idx[has], q[has, j])
-    q = np.unwrap(q, axis=0)
+        q[:, j] = np.interp(idx, idx[has], q_has[:, j])
     q -= 2 * np.pi * np.round((q[0] - home) / (2 * np.pi))
     shifts = 2 * np.pi * np.array([0.0, -1.0, 1.0])
     for j in range(6):  # six joints, three candidate turns each

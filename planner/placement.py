@@ -3,13 +3,14 @@
 The model frame is placed by its bounding-box bottom centre at ``offset`` (x, y, lift) from
 the tank's inner floor centre, rotated by ``yaw`` about z. A coarse search (yaw first, then
 a position grid) scores placements on a subsample of waypoints by (unreachable waypoints,
-smallest best-spin clearance); a refinement halves the steps around the winner. A placement
+smallest best-spin clearance); a refinement halves the steps around the winner; the best few
+and the tank centre are re-scored on a larger sample, the centre winning ties in reach. A placement
 that leaves part of the job unreachable is refused with an ``InputError``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from planner.orientation import (
     alpha_allowed,
     alpha_of,
     nozzle_axis,
-    tilt_levels,
+    orientation_levels,
     tool_rotation,
 )
 from slicer.errors import InputError
@@ -87,6 +88,20 @@ def _fits(cell: CellConfig, box: tuple[np.ndarray, np.ndarray], offset: np.ndarr
                 + 1e-9)
 
 
+def fit_gel(cell: CellConfig, toolpath: Toolpath) -> CellConfig:
+    """The cell with the gel filled to ``gel_cover_mm`` above the part's top (``fit_gel``),
+    never above ``gel_fill_mm``; the cell unchanged without ``fit_gel``."""
+    tank = cell.tank
+    if not tank.fit_gel or not len(toolpath):
+        return cell
+    lo, hi = bbox(toolpath)
+    top = cell.placement.offset_mm[2] + float(hi[2] - lo[2])
+    level = min(tank.gel_fill_mm, top + tank.gel_cover_mm)
+    if level >= tank.gel_fill_mm or level <= 0:
+        return cell
+    return replace(cell, tank=replace(tank, gel_fill_mm=level))
+
+
 def waypoint_tangents(position: np.ndarray, path: np.ndarray) -> np.ndarray:
     """Unit motion direction (N, 3) at each waypoint: central differences inside a path."""
     N = len(position)
@@ -114,13 +129,14 @@ def _tangents(toolpath: Toolpath, idx: np.ndarray) -> np.ndarray:
 
 
 def score(reach: Reach, toolpath: Toolpath, model_T: np.ndarray, idx: np.ndarray,
-          spins: int = 8) -> tuple[int, float, int, int]:
+          spins: int = 8, tilt_step_deg: float = 10.0,
+          lean_step_deg: float = 20.0) -> tuple[int, float, int, int]:
     """(unreachable count, clearance score mm, first reason, first waypoint) of a placement.
 
     The clearance score is the smallest best-spin clearance over the sampled waypoints plus a
     tenth of the mean of their lowest quarter (each capped at 100 mm), so ties of the minimum
     (e.g. nozzle to floor, the same everywhere) are broken by the tight spots of the rest of
-    the job; each waypoint that needs a tilt costs 10 mm.
+    the job; each waypoint that needs a tilt or a lean costs 2 mm.
     """
     R_m = model_T[:3, :3]
     p = toolpath.position[idx] @ R_m.T + model_T[:3, 3]
@@ -134,16 +150,17 @@ def score(reach: Reach, toolpath: Toolpath, model_T: np.ndarray, idx: np.ndarray
     first_pair = np.full(len(idx), -1, dtype=np.int64)
     alpha0 = alpha_of(-n, t)
     extrude = toolpath.extrude[idx]
-    for li, level in enumerate(tilt_levels(reach.cell, alpha0, 10.0)):
+    for li, (tilt_l, lean_l) in enumerate(orientation_levels(reach.cell, alpha0, tilt_step_deg,
+                                                               lean_step_deg)):
         rows = np.flatnonzero(~reach_ok)
         if not len(rows):
             break
-        ax = nozzle_axis(n[rows], t[rows], np.full(len(rows), level))
+        ax = nozzle_axis(n[rows], t[rows], np.full(len(rows), tilt_l), np.full(len(rows), lean_l))
         R = tool_rotation(np.repeat(ax, spins, axis=0), np.tile(grid, len(rows)))
         q = reach.solve(np.repeat(p[rows], spins, axis=0), R, reach.home)
         ev = reach.check(q, iters=8)
         st = ev.status.reshape(len(rows), spins)
-        st = np.where(alpha_allowed(reach.cell, alpha0[rows] - level, extrude[rows])[:, None],
+        st = np.where(alpha_allowed(reach.cell, alpha_of(ax, t[rows]), extrude[rows])[:, None],
                       st, np.int8(ALPHA))
         ok = st == OK
         clear = np.where(ok, np.nan_to_num(ev.clearance, nan=-1e9).reshape(len(rows), spins),
@@ -166,10 +183,11 @@ def score(reach: Reach, toolpath: Toolpath, model_T: np.ndarray, idx: np.ndarray
         first_wp = int(idx[i])
         if first_reason == COLLISION and first_pair[i] >= 0:
             first_reason = 100 + int(first_pair[i])
-    # tilted waypoints count as a lost 10 mm of clearance each: prefer placements without tilt
+    # tilted or leaned waypoints count as a lost 2 mm of clearance each: prefer placements
+    # where the nozzle follows -normal
     if reach_ok.any():
         b = np.sort(np.minimum(best[reach_ok], 100.0))
-        value = float(b[0] + 0.1 * b[: max(1, len(b) // 4)].mean()) - 10.0 * tilted
+        value = float(b[0] + 0.1 * b[: max(1, len(b) // 4)].mean()) - 2.0 * tilted
     else:
         value = -np.inf
     return unreachable, value, first_reason, first_wp
@@ -287,6 +305,28 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
     else:
         key(*best)
     u, c, reason, wp = cache[(round(best[0], 6), round(best[1], 6), round(best[2] % 360.0, 6))]
+    if pc.search:
+        # confirm on a larger sample (four times the steepest normals): the search samples
+        # are few, so re-score its best few placements and the tank centre and keep the best
+        ranked = sorted(cache.items(), key=lambda kv: (kv[1][0], -kv[1][1]))[:4]
+        finalists = {k for k, _ in ranked}
+        if _fits(cell, box, np.zeros(2), best[2]):
+            finalists.add((0.0, 0.0, round(best[2] % 360.0, 6)))
+        idx = np.unique(np.concatenate([
+            np.linspace(0, N - 1, min(N, 4 * samples)).round().astype(int), extremes,
+            np.argsort(-lean)[: 4 * samples]]))
+        confirmed = {k: score(reach, toolpath, model_transform(cell, box, np.array(
+            [k[0], k[1], lift]), k[2]), idx, 12, 5.0, 10.0) for k in sorted(finalists)}
+        evaluated += len(confirmed)
+        k_best = min(confirmed, key=lambda k: (confirmed[k][0], -confirmed[k][1]))
+        centre = (0.0, 0.0, round(best[2] % 360.0, 6))
+        if centre in confirmed and confirmed[centre][0] == confirmed[k_best][0]:
+            # the score checks waypoints one by one; along the path, spin and tilt must also
+            # change smoothly, which the centre (most room for the tool on every side)
+            # allows best: it wins unless another placement reaches more sampled waypoints
+            k_best = centre
+        best = k_best
+        u, c, reason, wp = confirmed[k_best]
     offset = (best[0], best[1], lift)
     if u:
         raise InputError(

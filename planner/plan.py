@@ -1,6 +1,7 @@
 """Toolpath -> timed UR5e joint trajectory: the ``mesp plan`` pipeline as a library call.
 
-Stages: placement (search the model's place in the tank), resample (insert samples on long
+Stages: normals (repair single-waypoint normal spikes), placement (search the model's place in
+the tank), resample (insert samples on long
 segments), orientation (spin and alpha per sample), velocity (DLS joint rates), timing (time law
 within joint limits), report. ``plan`` returns the ``Trajectory`` stage and the report section.
 """
@@ -8,16 +9,32 @@ within joint limits), report. ``plan`` returns the ``Trajectory`` stage and the 
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
+from scipy import ndimage
 
 from planner import kinematics as kin
 from planner.cell import CellConfig
+from planner.entry import (
+    TRANSFER,
+    SafeMove,
+    joint_segment,
+    move_speed,
+    safe_heights,
+    safe_move,
+)
 from planner.orientation import COLLISION, OK, REASONS, Orientation, Reach, alpha_of, choose, unit
-from planner.placement import Placement, choose_placement, waypoint_tangents
-from planner.timing import Timing, angular_rates, task_rates, time_law
+from planner.placement import Placement, choose_placement, fit_gel, waypoint_tangents
+from planner.timing import (  # noqa: F401  (path_parameter: re-exported)
+    ROTATION_MM_PER_RAD,
+    Timing,
+    angular_rates,
+    path_parameter,
+    task_rates,
+    time_law,
+)
 from planner.trajectory import Trajectory
 from slicer.errors import InputError
 from slicer.progress import Progress, StageTimer
@@ -111,21 +128,107 @@ def resample(toolpath: Toolpath, model_T: np.ndarray, cell: CellConfig) -> Sampl
     return Samples(tcp, normal, tangent, waypoint, extrude, speed, height)
 
 
-ROTATION_MM_PER_RAD = 50.0  # tool rotation counted as path length where the TCP stays
+def repair_normals(toolpath: Toolpath, spike_deg: float = 20.0,
+                   agree_deg: float = 10.0) -> tuple[Toolpath, np.ndarray]:
+    """Replace isolated normal spikes (one or two waypoints) by their neighbours' mean.
+
+    A waypoint's normal is a spike when it deviates more than ``spike_deg`` from the mean of
+    the normals ``gap`` waypoints before and after it (gap 1, then 2, within one path) while
+    those two agree within ``agree_deg``. The slicer occasionally yields such spikes (a
+    degenerate layer triangle); following one would swing the wrist tens of degrees within
+    a fraction of a millimetre of path. Returns the repaired toolpath and the (N,) bool mask
+    of repaired waypoints.
+    """
+    n = np.array(toolpath.normal, dtype=float)
+    path = toolpath.path
+    N = len(n)
+    done = np.zeros(N, dtype=bool)
+    for gap in (1, 2):
+        if N <= 2 * gap:
+            break
+        i = np.arange(gap, N - gap)
+        prv, nxt = i - gap, i + gap
+        same = (path[prv] == path[i]) & (path[nxt] == path[i])
+        m = unit(n[prv] + n[nxt])
+        agree = np.einsum("ij,ij->i", n[prv], n[nxt]) >= np.cos(np.radians(agree_deg))
+        spike = np.einsum("ij,ij->i", n[i], m) < np.cos(np.radians(spike_deg))
+        fix = i[same & agree & spike]
+        n[fix] = m[same & agree & spike]
+        done[fix] = True
+    if not done.any():
+        return toolpath, done
+    return replace(toolpath, normal=n), done
 
 
-def path_parameter(tcp_mm: np.ndarray, R: np.ndarray) -> np.ndarray:
-    """Generalised arc length s (M,) mm: per step the TCP travel, or ROTATION_MM_PER_RAD
-    times the tool rotation angle for steps where the TCP stays put (never zero)."""
-    if len(tcp_mm) < 2:
-        return np.zeros(len(tcp_mm))
-    step = np.linalg.norm(np.diff(tcp_mm, axis=0), axis=1)
-    rel = np.einsum("kji,kjl->kil", R[:-1], R[1:])  # R_k^T R_{k+1}
-    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
-    # TCP travel where the TCP moves (so |dp/ds| = 1 and speeds are exact); rotation only
-    # where it does not
-    ds = np.where(step > 1e-3, step, np.maximum(ROTATION_MM_PER_RAD * np.arccos(cos), 1e-6))
-    return np.concatenate([[0.0], np.cumsum(ds)])
+TURN_DEG_PER_MM = 1.5  # normals turning faster than this along a path are smoothed
+
+
+def smooth_normals(toolpath: Toolpath, k: int, max_deg: float) -> tuple[Toolpath, np.ndarray]:
+    """Normals averaged over +-``k`` waypoints of their path, moved at most ``max_deg``.
+
+    Where the normal turns sharply along a path, following it exactly makes the long tool
+    swing the arm and forces the TCP slower than the toolpath speed; a small, bounded
+    deviation from -normal (it changes alpha by at most ``max_deg``) keeps the speed.
+    Returns the smoothed toolpath and the (N,) deviation in rad.
+    """
+    n = np.asarray(toolpath.normal, dtype=float)
+    N = len(n)
+    if k <= 0 or max_deg <= 0 or N < 3:
+        return toolpath, np.zeros(N)
+    path = toolpath.path
+    idx = np.arange(N)
+    new = np.r_[True, path[1:] != path[:-1]]
+    first = np.maximum.accumulate(np.where(new, idx, 0))
+    last_rev = np.minimum.accumulate(np.where(np.r_[path[1:] != path[:-1], True], idx,
+                                              N - 1)[::-1])[::-1]
+    lo = np.maximum(idx - k, first)
+    hi = np.minimum(idx + k, last_rev)
+    S = np.concatenate([np.zeros((1, 3)), np.cumsum(n, axis=0)])
+    m = unit((S[hi + 1] - S[lo]) / (hi - lo + 1)[:, None])
+    cos = np.clip(np.einsum("ij,ij->i", m, n), -1.0, 1.0)
+    ang = np.arccos(cos)
+    cap = np.radians(max_deg)
+    # slerp from n towards m, stopping at the cap
+    f = np.where(ang > cap, cap / np.maximum(ang, 1e-12), 1.0)
+    sin = np.sin(ang)
+    ok = sin > 1e-9
+    w0 = np.where(ok, np.sin((1 - f) * ang) / np.where(ok, sin, 1.0), 1.0 - f)
+    w1 = np.where(ok, np.sin(f * ang) / np.where(ok, sin, 1.0), f)
+    out = unit(w0[:, None] * n + w1[:, None] * m)
+    # only where the normal turns fast (faster than TURN_DEG_PER_MM over the window)
+    P = toolpath.position
+    span = np.linalg.norm(P[hi] - P[lo], axis=1)
+    turn = np.arccos(np.clip(np.einsum("ij,ij->i", n[hi], n[lo]), -1.0, 1.0))
+    fast = turn > np.radians(TURN_DEG_PER_MM) * np.maximum(span, 1e-9)
+    fast = ndimage.binary_dilation(fast, structure=np.ones(2 * k + 1, dtype=bool))
+    out = np.where(fast[:, None], out, n)
+    dev = np.where(fast, np.arccos(np.clip(np.einsum("ij,ij->i", out, n), -1.0, 1.0)), 0.0)
+    return replace(toolpath, normal=out), dev
+
+
+REPEAT_DT_S = 1e-6  # time step given to a sample that repeats the previous pose
+
+
+def moving_samples(q: np.ndarray) -> np.ndarray:
+    """(M,) bool: False for samples whose joints equal the previous sample's (to 1e-6 rad)."""
+    keep = np.ones(len(q), dtype=bool)
+    if len(q) > 1:
+        keep[1:] = np.abs(np.diff(q, axis=0)).max(axis=1) > 1e-6
+    return keep
+
+
+def expand_timing(timing: Timing, keep: np.ndarray) -> Timing:
+    """The time law of the moving samples (``keep``) spread back over all samples.
+
+    A repeated sample takes the values of the sample it repeats, REPEAT_DT_S later (``t``
+    must increase), so every step between moving samples keeps its duration.
+    """
+    if keep.all():
+        return timing
+    src = np.cumsum(keep) - 1
+    t = timing.t[src] + REPEAT_DT_S * np.cumsum(~keep)
+    return Timing(t, timing.qd[src], timing.speed[src], timing.target[src],
+                  timing.limited[src], timing.iterations, timing.status)
 
 
 def _stats(x: np.ndarray) -> dict[str, float]:
@@ -151,7 +254,12 @@ def plan(
         raise InputError("the toolpath holds non-finite positions or normals",
                          "re-run `mesp slice`")
     timer = StageTimer(progress)
+    cell = fit_gel(cell, toolpath)
     reach = Reach(cell)
+    with timer.stage("normals"):
+        toolpath, repaired = repair_normals(toolpath)
+        toolpath, smoothed = smooth_normals(toolpath, cell.planning.smooth_waypoints,
+                                            cell.planning.smooth_max_deg)
     with timer.stage("placement"):
         if placement is None:
             placement = choose_placement(reach, toolpath)
@@ -159,18 +267,37 @@ def plan(
         samples = resample(toolpath, placement.model_T, cell)
     with timer.stage("orientation"):
         orient = choose(reach, samples.tcp, samples.normal, samples.tangent, samples.extrude)
+    with timer.stage("entry"):
+        # home -> above the first sample -> plunge along its nozzle axis; the mirror at the end
+        heights = safe_heights(reach)
+        entry = safe_move(reach, reach.home, orient.q[0], heights)
+        leave = safe_move(reach, orient.q[-1], reach.home, heights)
+        samples, orient, part, corner = _with_moves(reach, samples, orient, entry, leave)
     with timer.stage("velocity"):
         q = orient.q
         T_tcp = kin.fk(q, reach.tool_m)
         tcp = T_tcp[:, :3, 3] * 1000.0
         axis = T_tcp[:, :3, 2]
-        s = path_parameter(tcp, T_tcp[:, :3, :3])
-        omega = angular_rates(T_tcp[:, :3, :3], s)
-        dq = task_rates(q, tcp, axis, omega, s, reach.tool_m, cell.planning.damping)
+        # samples that repeat the previous pose (repeated waypoints) carry no motion: time
+        # and joint rates come from the others, the repeats follow 1 us later
+        keep = moving_samples(q)
+        s = path_parameter(tcp[keep], T_tcp[keep, :3, :3])
+        # entry and exit: joint rates of the sampled joint path; the toolpath: DLS rates
+        dq = np.gradient(q[keep], s, axis=0)
+        main = part[keep] == 1
+        omega = angular_rates(T_tcp[keep][main, :3, :3], s[main])
+        dq[main] = task_rates(q[keep][main], tcp[keep][main], axis[keep][main], omega, s[main],
+                              reach.tool_m, cell.planning.damping)
+        # at rest where the toolpath begins and ends and at the corners of entry and exit
+        stop = np.zeros(len(q), dtype=bool)
+        stop[np.flatnonzero(part == 1)[[0, -1]]] = True
+        stop |= corner
     with timer.stage("timing"):
         vmax = np.radians(cell.robot.max_velocity_deg_s)
         amax = np.radians(cell.robot.max_acceleration_deg_s2)
-        timing = time_law(q, dq, tcp, s, samples.speed, vmax, amax)
+        timing = expand_timing(
+            time_law(q[keep], dq, tcp[keep], s, samples.speed[keep], vmax, amax,
+                     stop=stop[keep]), keep)
     with timer.stage("report"):
         alpha = np.degrees(alpha_of(axis, samples.tangent))
         traj = Trajectory(
@@ -180,12 +307,104 @@ def plan(
         )
         report = _report(toolpath, cell, reach, samples, orient, timing, placement, traj,
                          timer.seconds)
-    status = "ok" if not report["unreachable"]["count"] else "unreachable waypoints"
+        report["normals_repaired"] = int(repaired.sum())
+        report["normals_smoothed_deg"] = _stats(np.degrees(smoothed))
+        report["gel_fill_mm"] = cell.tank.gel_fill_mm
+        report["entry"] = _move_report(entry, traj, part == 0)
+        report["exit"] = _move_report(leave, traj, part == 2)
+    un = report["unreachable"]
+    # entry and exit samples are reported under "entry"/"exit", not as between-waypoint ones
+    un["between_waypoints"] = int(((orient.status != OK) & (samples.waypoint < 0)
+                                   & (part == 1)).sum())
+    status = "ok" if not (un["count"] or un["between_waypoints"]) else "unreachable waypoints"
+    for name, move in (("entry", entry), ("exit", leave)):
+        if not move.ok and status == "ok":
+            status = (f"unreachable {name}: {move.reason}; move the part away from the walls "
+                      "(placement) or change the home pose")
     if timing.status != "ok":
         status = timing.status
     report["status"] = status
     return PlanResult(traj, report, samples, orient, timing, placement, orient.clearance,
                       status)
+
+
+def _with_moves(reach: Reach, samples: Samples, orient: Orientation, entry: SafeMove,
+                leave: SafeMove) -> tuple[Samples, Orientation, np.ndarray, np.ndarray]:
+    """Samples and orientation with the entry before and the exit after the toolpath's.
+
+    Returns them, ``part`` (M,) int8: 0 entry, 1 toolpath, 2 exit, and ``corner`` (M,) bool:
+    the entry's and exit's rest samples (``SafeMove.stop``). An entry or exit
+    without a solution somewhere is replaced by the plain joint interpolation (so the arrays
+    stay finite) and keeps its failing status.
+    """
+    moves = []
+    for move, first in ((entry, True), (leave, False)):
+        q, status, stop = move.q, move.status, move.stop
+        if np.isnan(q).any():
+            q = joint_segment(move.q[0] if first else orient.q[-1],
+                              orient.q[0] if first else move.q[-1])
+            status = np.full(len(q), int(move.status[move.status != OK][0]), np.int8)
+            clear, pair = np.full(len(q), np.nan), np.full(len(q), -1, np.int32)
+            stop = np.zeros(len(q), dtype=bool)
+            stop[[0, -1]] = True
+        else:
+            clear, pair = move.clearance, move.pair
+        sl = slice(0, -1) if first else slice(1, None)  # the shared toolpath sample once
+        seg = move.segment if len(move.segment) == len(q) else np.full(len(q), TRANSFER)
+        v = move_speed(reach, seg)
+        moves.append((q[sl], status[sl], clear[sl], pair[sl], stop[sl], v[sl]))
+    (qa, sa, ca, pa, ka, va), (qb, sb, cb, pb, kb, vb) = moves
+    T = kin.fk(np.vstack([qa, qb]), reach.tool_m)
+    tcp = T[:, :3, 3] * 1000.0
+    axis = T[:, :3, 2]
+    na = len(qa)
+
+    def cat(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
+        return np.concatenate([a, b, c])
+
+    M = len(samples.tcp)
+    tcp_all = cat(tcp[:na], samples.tcp, tcp[na:])
+    tangent = unit(np.gradient(tcp_all, axis=0)) if len(tcp_all) > 1 else np.zeros_like(tcp_all)
+    tangent[na:na + M] = samples.tangent
+    n_a, n_b = na, len(qb)
+    new_samples = Samples(
+        tcp=tcp_all,
+        normal=cat(-axis[:na], samples.normal, -axis[na:]),
+        tangent=tangent,
+        waypoint=cat(np.full(n_a, -1, np.int32), samples.waypoint, np.full(n_b, -1, np.int32)),
+        extrude=cat(np.zeros(n_a, bool), samples.extrude, np.zeros(n_b, bool)),
+        speed=cat(va, samples.speed, vb),
+        height=cat(np.full(n_a, samples.height[0]), samples.height,
+                   np.full(n_b, samples.height[-1])),
+    )
+    o = orient
+    new_orient = Orientation(
+        q=cat(qa, o.q, qb), axis=cat(axis[:na], o.axis, axis[na:]),
+        psi=cat(np.full(n_a, o.psi[0]), o.psi, np.full(n_b, o.psi[-1])),
+        tilt=cat(np.zeros(n_a), o.tilt, np.zeros(n_b)),
+        lean=cat(np.zeros(n_a), o.lean, np.zeros(n_b)),
+        status=cat(sa, o.status, sb).astype(np.int8), pair=cat(pa, o.pair, pb).astype(np.int32),
+        clearance=cat(ca, o.clearance, cb),
+    )
+    part = cat(np.zeros(n_a, np.int8), np.ones(M, np.int8), np.full(n_b, 2, np.int8))
+    return new_samples, new_orient, part, cat(ka, np.zeros(M, bool), kb)
+
+
+def _move_report(move: SafeMove, traj: Trajectory, rows: np.ndarray) -> dict[str, Any]:
+    """The "entry"/"exit" section: status, safe height, plunge length, clearance, duration."""
+    seg = move.segment
+    line = seg != TRANSFER
+    tcp = move.tcp[line]
+    length = float(np.linalg.norm(np.diff(tcp, axis=0), axis=1).sum()) if len(tcp) > 1 else 0.0
+    t = traj.t[rows]
+    return {
+        "status": "ok" if move.ok else move.reason,
+        "samples": int(rows.sum()),
+        "safe_z_mm": round(move.safe_z_mm, 3),
+        "axis_move_mm": round(length, 3),
+        "min_clearance_mm": float(np.nanmin(move.clearance)) if move.ok else None,
+        "duration_s": float(t[-1] - t[0]) if len(t) > 1 else 0.0,
+    }
 
 
 def _report(
@@ -195,6 +414,7 @@ def _report(
     """The "plan" section of report.json (mm, s, deg)."""
     ex = samples.extrude
     wp = samples.waypoint
+    traj_axis = orient.axis
     # unreachable toolpath waypoints with their reasons
     bad = (orient.status != OK) & (wp >= 0)
     reasons = [REASONS[int(s)] for s in orient.status[bad]]
@@ -223,7 +443,9 @@ def _report(
     step = np.linalg.norm(np.diff(traj.tcp, axis=0), axis=1)
     v_step = step / np.maximum(dt, 1e-12)
     ex_step = ex[:-1] & (step > 1e-6)  # zero-length steps (repeated waypoints) have no speed
-    target_step = samples.speed[:-1]
+    # the toolpath speed varies linearly along a segment (resample), so a step's target is
+    # the mean of its ends' speeds
+    target_step = 0.5 * (samples.speed[:-1] + samples.speed[1:])
     ratio = v_step[ex_step] / np.maximum(target_step[ex_step], 1e-12)
     # over-deposition: constant extrusion C for longer than the toolpath speed asks
     C = cell.planning.extrusion_rate_mm3_s
@@ -247,6 +469,12 @@ def _report(
         "alpha_deg": {**_stats(traj.alpha[ex]),
                       "tilted_samples": int(np.sum(np.abs(orient.tilt[ex]) > 1e-6)),
                       "tilt_max_deg": float(np.degrees(np.abs(orient.tilt).max()))},
+        "lean_deg": {**_stats(np.degrees(orient.lean[ex])),
+                     "leaned_samples": int(np.sum(np.abs(orient.lean[ex]) > 1e-6)),
+                     "lean_max_deg": float(np.degrees(np.abs(orient.lean).max())),
+                     "limit_deg": cell.planning.lean_max_deg},
+        "deviation_deg": _stats(np.degrees(np.arccos(np.clip(
+            -np.einsum("ij,ij->i", traj_axis[ex], samples.normal[ex]), -1.0, 1.0)))),
         "joint_margin_deg": {
             "min_to_lower": list(np.round(q_deg.min(axis=0) - lo, 3)),
             "min_to_upper": list(np.round(hi - q_deg.max(axis=0), 3)),
@@ -266,7 +494,9 @@ def _report(
             "max_local_factor": float(1.0 / max(ratio.min(), 1e-12)) if len(ratio) else 1.0,
         },
         "unreachable": {"count": int(bad.sum()), "by_reason": dict(Counter(reasons)),
-                        "waypoints": detail},
+                        "waypoints": detail,
+                        # samples inserted between waypoints (long moves) that fail too
+                        "between_waypoints": int(((orient.status != OK) & (wp < 0)).sum())},
         "time_law": {"status": timing.status, "iterations": timing.iterations},
         "timing_s": {k2: round(v, 4) for k2, v in seconds.items()},
     }

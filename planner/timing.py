@@ -148,6 +148,9 @@ def _null_vector(J: np.ndarray, a: np.ndarray, lam2: np.ndarray) -> np.ndarray:
     return n / np.where(norm > 1e-15, norm, 1.0)
 
 
+MIN_DT = 1e-6  # s, shortest step of the time law
+
+
 def _scan_limit(cap: np.ndarray, inc: np.ndarray) -> np.ndarray:
     """x_k = min(cap_k, x_{k-1} + inc_{k-1}) for all k at once (x_0 = cap_0)."""
     S = np.concatenate([[0.0], np.cumsum(inc)])
@@ -156,7 +159,7 @@ def _scan_limit(cap: np.ndarray, inc: np.ndarray) -> np.ndarray:
 
 def time_law(
     q: np.ndarray, dq: np.ndarray, tcp_mm: np.ndarray, s: np.ndarray, target: np.ndarray,
-    vmax: np.ndarray, amax: np.ndarray, max_iter: int = 30,
+    vmax: np.ndarray, amax: np.ndarray, max_iter: int = 30, stop: np.ndarray | None = None,
 ) -> Timing:
     """Fastest time law within limits and the toolpath speed (see module docstring).
 
@@ -165,6 +168,9 @@ def time_law(
         tcp_mm: (M, 3) float64, mm. s: (M,) float64, mm, path parameter (increasing).
         target: (M,) float64, mm/s, toolpath speed per sample.
         vmax, amax: (6,) float64, rad/s and rad/s^2 joint limits.
+        stop: (M,) bool or None, samples where the motion comes to rest (besides the first
+            and the last): the corners between a joint-space move, a plunge along the nozzle
+            axis and the toolpath, where the joint velocity direction jumps.
     """
     M = len(q)
     if M < 2:
@@ -193,6 +199,8 @@ def time_law(
     cap = np.minimum(np.minimum(x_speed, x_joint), x_curv)
     cap = np.minimum(cap, 1e12)
     cap[0] = cap[-1] = 0.0
+    if stop is not None:
+        cap[np.asarray(stop, dtype=bool)] = 0.0
     status = "ok"
     it = 0
     while True:  # a few passes, each fully vectorised
@@ -207,7 +215,13 @@ def time_law(
         x = _scan_limit(x[::-1], (2.0 * budget[1:] * ds)[::-1])[::-1]  # decelerations
         x = np.maximum(x, 0.0)
         sd = np.sqrt(x)
-        dt = 2.0 * ds / np.maximum(sd[:-1] + sd[1:], 1e-12)
+        # at least MIN_DT per step: t (up to ~1e5 s on a long job) must visibly increase
+        dt = np.maximum(2.0 * ds / np.maximum(sd[:-1] + sd[1:], 1e-12), MIN_DT)
+        # a step between two rests: from rest to rest with the acceleration budget
+        both = (sd[:-1] + sd[1:]) < 1e-9
+        if both.any():
+            acc_s = np.maximum(np.minimum(budget[:-1], budget[1:])[both], 1e-6)
+            dt[both] = np.maximum(2.0 * np.sqrt(ds[both] / acc_s), MIN_DT)
         qd = dq * sd[:, None]
         acc = np.abs(np.diff(qd, axis=0)) / dt[:, None]
         ratio = np.max(acc / amax, axis=1)
@@ -227,4 +241,23 @@ def time_law(
     speed = dp * sd  # mm/s
     limited = speed < 0.99 * target
     limited[0] = limited[-1] = False
+    if stop is not None:
+        limited[np.asarray(stop, dtype=bool)] = False
     return Timing(t, qd, speed, target, limited, it, status)
+
+
+ROTATION_MM_PER_RAD = 50.0  # tool rotation counted as path length where the TCP stays
+
+
+def path_parameter(tcp_mm: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Generalised arc length s (M,) mm: per step the TCP travel, or ROTATION_MM_PER_RAD
+    times the tool rotation angle for steps where the TCP stays put (never zero)."""
+    if len(tcp_mm) < 2:
+        return np.zeros(len(tcp_mm))
+    step = np.linalg.norm(np.diff(tcp_mm, axis=0), axis=1)
+    rel = np.einsum("kji,kjl->kil", R[:-1], R[1:])  # R_k^T R_{k+1}
+    cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    # TCP travel where the TCP moves (so |dp/ds| = 1 and speeds are exact); rotation only
+    # where it does not
+    ds = np.where(step > 1e-3, step, np.maximum(ROTATION_MM_PER_RAD * np.arccos(cos), 1e-6))
+    return np.concatenate([[0.0], np.cumsum(ds)])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -15,9 +16,11 @@ from slicer.errors import InputError
 HELP = """\
 Plan the UR5e motion for a sliced job (paper sections 3.1 and 5.2).
 
-Reads DIR/toolpath.npz, places the model in the gel tank (searching position and rotation for
-the best clearance), orients the nozzle along -normal (alpha = 90 deg; tilted within
-[70, 110] deg only where limits, singularities or collisions demand), solves the joint motion by
+Reads DIR/toolpath.npz, fills the gel to 15 mm above the part (cell: fit_gel, gel_cover_mm),
+places the model in the gel tank (searching position and rotation for the best clearance),
+orients the nozzle along -normal (alpha = 90 deg; only where limits, singularities or
+collisions demand, leaned about the direction of motion up to lean_max_deg, which keeps alpha,
+or tilted within [70, 110] deg, the smallest deviation first), solves the joint motion by
 damped-least-squares differential kinematics and times it within the joint velocity and
 acceleration limits at the toolpath speed. Writes DIR/trajectory.npz, the "plan" section of
 DIR/report.json and figures/plan_*.png. The cell (robot base, tool, tank, gel, limits) is the
@@ -94,4 +97,10 @@ def run(args: argparse.Namespace) -> int:
             f"limits (first: {first['first']}, {first['reason']}); see plan.unreachable in "
             "report.json"
         )
+    if report["status"] != "ok":
+        # the trajectory is kept for inspection, but a cell would refuse it: say so and fail
+        print(f"mesp: error: the plan cannot be executed ({report['status']}); see plan in "
+              f"{job_dir / 'report.json'}, move the part or use a cell that reaches it",
+              file=sys.stderr)
+        return 3
     return 0

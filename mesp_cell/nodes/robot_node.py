@@ -1,8 +1,11 @@
 """The robot node: owns the arm driver (UR5e over RTDE, or a twin) and streams trajectories.
 
 Commands (``robot/cmd``): ``load`` (path, sha256 of trajectory.npz) checks and resamples a
-trajectory; ``move`` (args ``to``: "home" | "sample", ``sample``) moves point-to-point;
-``stream`` (args ``start``, ``after_waypoint``, ``lead_s``, ``rate``) streams from a sample and
+trajectory; ``move`` (args ``to``: "home" | "sample", ``sample``) moves there on a checked safe
+path (``planner.entry``: retract along the nozzle axis out of the gel, transfer above it,
+plunge along the target's axis; refused with its reason if the cell model finds no such path);
+``stream`` (args ``start``, ``end``, ``after_waypoint``, ``lead_s``, ``rate``) streams the
+samples ``start`` .. ``end`` - 1 (default: to the end) and
 switches the extruder ``lead_s`` ahead of every change of deposition, on the servo clock (lead
 compensation of the extruder's flow response); ``stop``; ``reset`` clears a latched e-stop.
 Motions run in one motion thread; their end is published as a ``StreamEvent`` on
@@ -35,16 +38,33 @@ from mesp_cell.messages import (
     WaypointReached,
 )
 from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
+from planner.cell import CellConfig, load_cell
+
+END = "\x00end"  # guard reason that ends a stream at its ``end`` sample (not a stop)
 
 log = logging.getLogger("mesp.robot")
 
 
-def make_driver(params: dict[str, Any], servo: ServoConfig) -> RobotDriver:
+def cell_of(params: dict[str, Any]) -> CellConfig:
+    """The cell description of this robot: ``params['cell_file']`` ("" = the bundled cell)."""
+    cell = cell_file_of(params)
+    return load_cell(Path(cell) if cell else None)
+
+
+def home_and_tool(params: dict[str, Any], cell: CellConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Home (6,) rad and tool (4, 4) mm: the cell's, unless the launch file overrides them
+    (``home_deg``, ``tool_T``)."""
+    home = np.radians(params.get("home_deg", cell.robot.home_deg))
+    tool = params.get("tool_T")
+    tool_T = cell.tool.tool_T if tool is None else np.asarray(tool, dtype=np.float64)
+    return home, tool_T
+
+
+def make_driver(params: dict[str, Any], servo: ServoConfig,
+                cell: CellConfig | None = None) -> RobotDriver:
     """The driver named by ``params['backend']``: "twin" (default), "mujoco" or "ur5e"."""
     backend = params.get("backend", "twin")
-    home = np.radians(params.get("home_deg", [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]))
-    tool = params.get("tool_T")
-    tool_T = None if tool is None else np.asarray(tool, dtype=np.float64)
+    home, tool_T = home_and_tool(params, cell if cell is not None else cell_of(params))
     if backend == "twin":
         from mesp_cell.drivers.robot_twin import KinematicTwin
 
@@ -96,9 +116,11 @@ class RobotNode(LifecycleNode):
     def on_configure(self) -> None:
         p = self.params
         self.servo = ServoConfig(**p.get("servo", {}))
-        self.driver = make_driver(p, self.servo)
+        self.cell = cell_of(p)
+        self.driver = make_driver(p, self.servo, self.cell)
         self.driver.connect()
-        self.home = np.radians(p.get("home_deg", [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]))
+        self.home, _ = home_and_tool(p, self.cell)
+        self.reach: Any = None  # planner.orientation.Reach of the loaded job's gel level
         self.extruder_name = p.get("extruder", "extruder")
         self.supervisor_name = p.get("supervisor", "supervisor")
         self.fresh_s = float(p.get("extruder_fresh_s", 0.05))
@@ -224,6 +246,7 @@ class RobotNode(LifecycleNode):
                 return Reply.refuse("robot is busy; stop it first")
             plan = StreamPlan.load(Path(cmd.path), self.servo.dt, cmd.sha256)
             self.plan, self.job_id = plan, cmd.job_id
+            self.reach = self._reach(Path(cmd.path).parent)
             return Reply.done(samples=plan.samples, layers=plan.layers,
                               waypoints=int(plan.wp_id.size), duration_s=plan.samples * plan.dt)
         if verb in ("move", "stream"):
@@ -243,6 +266,46 @@ class RobotNode(LifecycleNode):
         # even if its thread has not returned yet.
         return self._in_motion.is_set()
 
+    def _reach(self, job_dir: Path | None) -> Any:
+        """The planner's reachability model of this cell, gel filled as the job's plan
+        filled it (``fit_gel`` on the job's toolpath), or the cell's own fill."""
+        from planner.orientation import Reach
+        from planner.placement import fit_gel
+
+        cell = self.cell
+        if job_dir is not None and (job_dir / "toolpath.npz").is_file():
+            from slicer.stages import Toolpath
+
+            cell = fit_gel(cell, Toolpath.load(job_dir))
+        return Reach(cell)
+
+    def _safe_path(self, target: np.ndarray) -> tuple[StreamPlan | None, str]:
+        """A servo plan from the current joints to ``target`` on a checked safe path
+        (``planner.entry.safe_move``), or None and the reason there is none; None and ""
+        when the robot is already there."""
+        from planner import entry
+
+        q0 = np.asarray(self.driver.joints(), dtype=float)
+        if np.abs(q0 - target).max() < 1e-4:
+            return None, ""
+        if self.reach is None:
+            self.reach = self._reach(None)
+        reach = self.reach
+        move = entry.safe_move(reach, q0, target, entry.safe_heights(reach), tolerate_start=True)
+        if not move.ok:
+            return None, f"no safe path: {move.reason}"
+        timing = entry.time_move(reach, move)
+        dt = self.servo.dt
+        # hold the target a little at the end: the servo (lookahead) settles onto it
+        hold = int(np.ceil(max(0.2, 2.0 * self.servo.lookahead_s) / dt))
+        K = int(np.floor(timing.t[-1] / dt + 1e-9)) + 1 + hold
+        tk = np.minimum(dt * np.arange(K), timing.t[-1])
+        qk = np.stack([np.interp(tk, timing.t, move.q[:, j]) for j in range(6)], axis=1)
+        empty = np.zeros(0, dtype=np.int64)
+        tool_T = self.plan.tool_T if self.plan is not None else self.cell.tool.tool_T
+        return StreamPlan(dt, qk, np.zeros(K, bool), empty, empty, np.zeros(0, bool), empty,
+                          0, tool_T), ""
+
     def _start_move(self, cmd: Command) -> Reply:
         to = cmd.arg("to", "home")
         if to == "home":
@@ -256,14 +319,27 @@ class RobotNode(LifecycleNode):
             target = self.plan.q[k]
         else:
             return Reply.refuse(f"unknown move target '{to}'")
+        path, why = self._safe_path(np.asarray(target, dtype=float))
+        if why:
+            return Reply.refuse(why)
         self._abort_move.clear()
+
+        def guard(k: int) -> str:
+            if self.estopped:
+                return self.estopped
+            return "move interrupted" if self._abort_move.is_set() else ""
 
         def run() -> None:
             self.mode = "moving"
-            log.info("move of %s to %s", cmd.job_id, to)
+            log.info("move of %s to %s (%d servo samples)", cmd.job_id, to,
+                     0 if path is None else path.samples)
             ok, why = False, "move interrupted"
             try:
-                ok = self.driver.move_j(target) and not self._abort_move.is_set()
+                if path is None:
+                    ok = not self._abort_move.is_set()
+                else:
+                    result = ServoStream(self.driver, path, 0, guard).run()
+                    ok, why = result.done, result.reason or why
             except Exception as exc:  # the end event must go out whatever happened
                 log.exception("move failed")
                 why = f"move failed: {exc}"
@@ -283,13 +359,21 @@ class RobotNode(LifecycleNode):
         if plan is None or cmd.job_id != self.job_id:
             return Reply.refuse(f"trajectory of job '{cmd.job_id}' is not loaded")
         start = int(cmd.arg("start", 0))
+        K = plan.samples
+        end = min(int(cmd.arg("end", K)), K)
+        if not start < end:
+            return Reply.refuse(f"empty stream: start {start}, end {end}")
         after = int(cmd.arg("after_waypoint", -1))
         lead_s = float(cmd.arg("lead_s", 0.0))
         rate = float(cmd.arg("rate", 6.57))
-        guard = self._guard_factory(plan, start, lead_s)
+        full_guard = self._guard_factory(plan, start, lead_s)
+
+        def guard(k: int) -> str:
+            return END if k >= end else full_guard(k)
+
         lead_n = self._lead_samples(lead_s, plan)
-        K = plan.samples
-        cmd_on = plan.extrude[np.minimum(np.arange(K) + lead_n, K - 1)]
+        # switch only for samples this stream sends (the part after ``end`` comes later)
+        cmd_on = plan.extrude[np.minimum(np.arange(K) + lead_n, end - 1)]
         switched = {"on": bool(cmd_on[start])}
 
         def on_sample(k: int) -> None:
@@ -325,6 +409,9 @@ class RobotNode(LifecycleNode):
                 self.driver.servo_stop()
                 result = StreamResult(False, f"stream failed: {exc}", stream.sample, time.time(),
                                       np.zeros(0))
+            if result.reason == END:  # reached ``end``: a finished stream, not a stop
+                result = StreamResult(True, "", result.last_sample, result.stop_t,
+                                      result.periods)
             self.stop_reason, self.stop_t = result.reason, result.stop_t
             self.mode = "idle" if result.done else "stopped"
             if result.reason:

@@ -2,7 +2,9 @@
 
 submitted -> (slicer node) sliced -> (planner node) planned -> pre-flight (the robot node
 loads and checks the trajectory; a refusal fails the job before anything moves) -> print:
-home, approach the start sample, prime and start extrusion ``lead_s`` ahead of deposition
+home, approach the start sample (the robot node's checked safe path; sample 0 is home), stream
+the planned entry (home, above the gel, plunge along the nozzle axis) up to the first deposition
+sample, prime and start extrusion ``lead_s`` ahead of deposition
 (lead compensation of the extruder's flow response), stream the trajectory (the robot node
 switches the extruder ``lead_s`` ahead of every change of ``extrude``, on the servo clock),
 record a checkpoint at every deposited waypoint, publish progress, stop the extruder, park.
@@ -20,6 +22,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from mesp_cell.drivers.stream import StreamPlan, sha256_of
 from mesp_cell.jobs import JobRecord, JobStore
@@ -232,7 +236,18 @@ class SupervisorNode(LifecycleNode):
         try:
             if not resume:
                 self._move(job.id, to="home")
+            # the robot node moves on a checked safe path: out of the gel along the nozzle
+            # axis, above it, and into it along the target sample's axis (sample 0 is home)
             self._move(job.id, to="sample", sample=start)
+            first = int(np.argmax(plan.extrude)) if plan.extrude.any() else plan.samples
+            if start < first:
+                # the planned entry (home -> plunge to the first waypoint) deposits nothing:
+                # stream it, then lead and prime at rest at the first deposition sample
+                ev = self._stream(job, plan, ext0, start, after, end=first)
+                self._drain(job.id)
+                if ev.kind != "done":
+                    raise Stopped(ev.reason or "stream stopped")
+                start = first
             lead_n = round(self.lead_s / self.dt)
             # Starting acknowledges a latched watchdog/stall fault (e.g. left by a killed
             # extruder node); an e-stop is only cleared by the operator (`mesp estop --reset`).
@@ -244,13 +259,7 @@ class SupervisorNode(LifecycleNode):
                 # also show in the extruder state (wall-clock latency) before the stream starts.
                 wait = (self.lead_s + (0.0 if resume else self.prime_s)) / self.time_scale
                 time.sleep(max(wait, min(self.lead_s, self.settle_s)))
-            self._check_request()
-            reply = self._request(robot, Command.make("stream", job.id, start=start,
-                                                      after_waypoint=after, lead_s=self.lead_s,
-                                                      rate=self.rate))
-            if not reply.ok:
-                raise Stopped(reply.reason)
-            ev = self._monitor(job, plan, ext0)
+            ev = self._stream(job, plan, ext0, start, after)
             if ev.kind == "done":
                 self._extruder("stop")
             self._drain(job.id)
@@ -264,6 +273,19 @@ class SupervisorNode(LifecycleNode):
         finally:
             with self._lock:
                 self.current, self.request = "", ""
+
+    def _stream(self, job: JobRecord, plan: StreamPlan, ext0: float, start: int, after: int,
+                end: int | None = None) -> StreamEvent:
+        """Stream samples ``start`` .. ``end`` - 1 (to the end by default) and follow it."""
+        self._check_request()
+        args: dict[str, Any] = {"start": start, "after_waypoint": after, "lead_s": self.lead_s,
+                                "rate": self.rate}
+        if end is not None:
+            args["end"] = end
+        reply = self._request(self.names["robot"], Command.make("stream", job.id, **args))
+        if not reply.ok:
+            raise Stopped(reply.reason)
+        return self._monitor(job, plan, ext0)
 
     def _stopped(self, job: JobRecord, reason: str, ext0: float) -> None:
         try:

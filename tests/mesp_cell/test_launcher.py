@@ -162,3 +162,30 @@ def test_processes_stop_when_the_launcher_dies(tmp_path: Path) -> None:
     else:
         os.kill(child, signal.SIGKILL)
         raise AssertionError("the child outlived its launcher")
+
+
+def test_both_launch_files_take_home_and_tool_from_the_cell(monkeypatch: pytest.MonkeyPatch,
+                                                           tmp_path: Path) -> None:
+    import numpy as np
+
+    from mesp_cell.nodes.robot_node import cell_of, home_and_tool
+    from planner.cell import load_cell
+    from planner.orientation import Reach
+
+    monkeypatch.setenv("MESP_HOME", str(tmp_path))
+    cell = load_cell()
+    for name in ("sim", "cell"):
+        spec = load_launch(bundled_launch(name))
+        robot = next(p for p in spec.processes if p.name == "robot")
+        assert robot.params is not None
+        assert "home_deg" not in robot.params and "tool_T" not in robot.params
+        params = dict(robot.params)
+        home, tool_T = home_and_tool(params, cell_of(params))
+        assert np.allclose(home, np.radians(cell.robot.home_deg))
+        assert np.allclose(tool_T, cell.tool.tool_T)
+    # the home is on the planner's IK branch and passes its checks
+    reach = Reach(cell)
+    assert reach.check(home[None]).status[0] == 0
+    # a launch override still wins
+    over, _ = home_and_tool({"home_deg": [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]}, cell)
+    assert np.allclose(np.degrees(over), [0.0, -90.0, 90.0, -90.0, -90.0, 0.0])

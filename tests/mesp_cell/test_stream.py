@@ -191,3 +191,65 @@ def test_mujoco_backend_tracks_the_stream(job: Path) -> None:
     tool[:3, 3] /= 1000.0
     expected = kin.fk(twin.joints()[None], tool)[0, :3, 3] * 1000.0
     assert np.allclose(twin.tcp_mm(), expected, atol=0.5)  # mm, same kinematics as planner
+
+
+def test_robot_node_moves_into_the_gel_only_along_the_nozzle_axis(tmp_path: Path) -> None:
+    """Resume approach: from a stop in the gel the robot node moves to another sample on a
+    checked safe path (retract along the axis, transfer above the gel, plunge) and arrives."""
+    from mesp_cell.bus.session import BusConfig
+    from mesp_cell.messages import Command
+    from mesp_cell.nodes.robot_node import RobotNode
+    from planner import kinematics as kin
+    from planner.cell import load_cell
+    from planner.orientation import Reach
+    from planner.placement import fit_gel
+    from planner.plan import plan
+    from tests.planner import synthetic as planner_synthetic
+
+    cell = load_cell()
+    tp = planner_synthetic.dome(radius=30.0, cap=6.0, rings=3, step=1.0)
+    result = plan(tp, cell)
+    tp.save(tmp_path)
+    result.trajectory.save(tmp_path)
+    node = RobotNode("robot", BusConfig(), {"backend": "twin",
+                                            "servo": {"time_scale": 1000.0}})
+    node.on_configure()
+    try:
+        assert np.allclose(node.home, np.radians(cell.robot.home_deg))
+        reply = node._on_command(Command.make("load", "j", path=str(tmp_path / "trajectory.npz")))
+        assert reply.ok, reply.reason
+        plan_q = node.plan.q  # type: ignore[union-attr]
+        ex = np.flatnonzero(node.plan.extrude)  # type: ignore[union-attr]
+        stop_at, resume_at = int(ex[len(ex) * 3 // 4]), int(ex[len(ex) // 4])
+        node.driver.q = plan_q[stop_at].copy()  # type: ignore[attr-defined]
+        path, why = node._safe_path(plan_q[resume_at])
+        assert path is not None and why == ""
+        reach = Reach(fit_gel(cell, tp))
+        gel = float((np.linalg.inv(cell.robot.base_T) @ cell.tank.floor_T)[2, 3]
+                    + reach.cell.tank.gel_fill_mm)
+        col = reach.collision
+        a, b = col.segments(path.q)
+        parts = [i for i, c in enumerate(col.capsules) if c.tool and c.name != "nozzle"]
+        radius = np.array([col.capsules[i].radius for i in parts])
+        lowest = (np.minimum(a[:, parts, 2], b[:, parts, 2]) - radius).min() * 1000.0
+        assert lowest >= gel  # only the shaft is ever in the gel
+        assert col.clearance(path.q).distance.min() >= cell.planning.clearance_mm - 0.5
+        # below the gel surface the tip moves along the stop's or the target's nozzle axis
+        T = kin.fk(path.q, reach.tool_m)
+        tip = T[:, :3, 3] * 1000.0
+        low = tip[:, 2] < gel
+        axes = {tuple(np.round(kin.fk(plan_q[k], reach.tool_m)[:3, 2], 6))
+                for k in (stop_at, resume_at)}
+        assert {tuple(np.round(x, 6)) for x in T[low, :3, 2]} <= axes
+        # the move itself, on the twin
+        reply = node._on_command(Command.make("move", "j", to="sample", sample=resume_at))
+        assert reply.ok, reply.reason
+        assert node._motion is not None
+        node._motion.join(30.0)
+        assert node.mode == "idle"
+        assert np.abs(node.driver.joints() - plan_q[resume_at]).max() < 1e-3
+        # already there: a zero move
+        path, why = node._safe_path(plan_q[resume_at] + 1e-6)
+        assert path is None and why == ""
+    finally:
+        node.on_shutdown()

@@ -80,3 +80,30 @@ def big_dome(n: int = 100_000, radius: float = 60.0, cap: float = 8.0,
     """A curved dome patch of about ``n`` waypoints (concentric rings, sphere normals)."""
     rings = max(round(2 * n * step / (2 * np.pi * radius)), 1)
     return dome(radius=radius, cap=cap, rings=rings, step=step)
+
+
+def rings(radius: float, heights: list[float], lean_deg: list[float], step: float = 1.0
+          ) -> Toolpath:
+    """Circles of ``radius`` at ``heights``, one path each; the normals of ring k lean
+    ``lean_deg[k]`` from +z towards the axis (positive: a bowl-shaped layer, like the bottom
+    of a cup) or away from it (negative)."""
+    pos, nrm, path = [], [], []
+    for i, (z, lean) in enumerate(zip(heights, lean_deg, strict=True)):
+        n = max(int(2 * np.pi * radius / step), 8)
+        th = np.linspace(0.0, 2 * np.pi, n, endpoint=False)
+        radial = np.stack([np.cos(th), np.sin(th), np.zeros(n)], 1)
+        a = np.radians(lean)
+        pos.append(radius * radial + [0.0, 0.0, z])
+        nrm.append(-np.sin(a) * radial + [0.0, 0.0, np.cos(a)])
+        path.append(np.full(n, i))
+    return make_toolpath(np.concatenate(pos), np.concatenate(nrm), np.concatenate(path))
+
+
+def random_frames(n: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n, 3) random unit normals and (n, 3) unit tangents perpendicular to them."""
+    rng = np.random.default_rng(seed)
+    normal = rng.normal(size=(n, 3))
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    tangent = np.cross(normal, rng.normal(size=(n, 3)))
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    return normal, tangent

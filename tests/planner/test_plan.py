@@ -5,9 +5,11 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from mesp_cell.cli import main
 from planner import kinematics as kin
+from planner.cell import CellConfig
 from planner.plan import PlanResult
 from planner.trajectory import Trajectory
 from slicer.report import read_report
@@ -68,3 +70,21 @@ def test_mesp_plan_user_errors(tmp_path: Path, capsys) -> None:  # type: ignore[
     assert main(["plan", str(tmp_path)]) == 2  # no toolpath.npz
     err = capsys.readouterr().err
     assert "toolpath.npz" in err and "Traceback" not in err
+
+
+def test_mesp_plan_fails_with_one_line_when_the_plan_is_not_executable(
+        cell: CellConfig, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from tests.planner.test_orientation import _wall_case
+
+    # waypoints reachable with a tilt, but the pose above the first one is not: blocked entry
+    _, tp = _wall_case(cell)
+    tp.save(tmp_path)
+    cell_file = tmp_path / "near_wall.toml"
+    cell_file.write_text("[placement]\noffset_mm = [80.0, 0.0, 10.0]\nyaw_deg = 0.0\n"
+                         "search = false\n")
+    code = main(["plan", str(tmp_path), "--cell", str(cell_file), "--quiet", "--no-figures"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 3
+    assert len(err) == 1 and err[0].startswith("mesp: error: the plan cannot be executed")
+    assert "unreachable entry" in err[0] and "Traceback" not in err[0]
+    assert (tmp_path / "trajectory.npz").is_file()  # kept for inspection
