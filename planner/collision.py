@@ -98,8 +98,12 @@ def robot_capsules(cell: CellConfig) -> list[Capsule]:
     return caps
 
 
+PEDESTAL_MM = 180.0  # footprint of the pedestal under a raised robot base (UR5e base: 149 mm)
+
+
 def cell_boxes(cell: CellConfig) -> list[Box]:
-    """Table, tank floor, the four tank walls and the gel volume, in the robot base frame (m)."""
+    """Table, robot pedestal (if the base stands above the table), tank floor, the four tank
+    walls and the gel volume, in the robot base frame (m)."""
     base_inv = np.linalg.inv(cell.robot.base_T)
     out: list[Box] = []
 
@@ -110,6 +114,13 @@ def cell_boxes(cell: CellConfig) -> list[Box]:
 
     t = cell.table
     add("table", np.eye(4), np.asarray(t.center_mm), np.asarray(t.size_mm))
+    table_top = t.center_mm[2] + t.size_mm[2] / 2
+    base = np.asarray(cell.robot.base_xyz_mm, dtype=float)
+    if base[2] > table_top + 1.0:
+        # the robot stands on a pedestal from the table top up to its base
+        h = base[2] - table_top
+        add("pedestal", np.eye(4), np.array([base[0], base[1], table_top + h / 2]),
+            np.array([PEDESTAL_MM, PEDESTAL_MM, h]))
     k = cell.tank
     F = k.floor_T
     ix, iy, ih = k.inner_size_mm
@@ -223,8 +234,8 @@ class CollisionModel:
         self.env_pairs: list[tuple[int, int]] = []
         for ci, cap in enumerate(self.capsules):
             for bi, box in enumerate(self.boxes):
-                if cap.name == LINK_NAMES[0] and box.name == "table":
-                    continue  # the base stands on the table
+                if cap.name == LINK_NAMES[0] and box.name in ("table", "pedestal"):
+                    continue  # the base stands on the table or the pedestal
                 if cap.name == NOZZLE and box.name in ("gel", "table"):
                     continue  # only the nozzle shaft may enter the gel
                 self.env_pairs.append((ci, bi))

@@ -54,7 +54,7 @@ def cell_mjcf(cell: CellConfig, kp: float = 100000.0, kv: float = 500.0,
         R = base_T[:3, :3] @ box.rotation
         if box.name == "gel":
             attrs = 'contype="0" conaffinity="0" rgba="0.6 0.8 1 0.25" group="1"'
-        elif box.name == "table":
+        elif box.name in ("table", "pedestal"):
             attrs = 'rgba="0.55 0.45 0.35 1"'
         else:
             attrs = 'rgba="0.85 0.9 0.95 0.35"'

@@ -77,3 +77,22 @@ def test_self_collision_is_detected(cell: CellConfig) -> None:
     c = model.clearance(np.stack([home, folded]))
     assert c.distance[0] > 0
     assert c.distance[1] < 0
+
+
+def test_a_raised_base_stands_on_a_pedestal_the_arm_must_clear(cell: CellConfig) -> None:
+    import dataclasses
+
+    from planner.collision import cell_boxes
+
+    boxes = {b.name: b for b in cell_boxes(cell)}
+    base_z = cell.robot.base_xyz_mm[2]
+    assert base_z > 0 and "pedestal" in boxes
+    # from the table top up to the base, whose frame is the boxes' frame (m)
+    ped = boxes["pedestal"]
+    assert np.isclose(ped.center[2] + ped.half[2], 0.0)
+    assert np.isclose(2 * ped.half[2] * 1000.0, base_z - 0.0)
+    names = CollisionModel(cell).names
+    assert "shoulder vs pedestal" not in names and "forearm vs pedestal" in names
+    flat = dataclasses.replace(cell, robot=dataclasses.replace(cell.robot,
+                                                               base_xyz_mm=(0.0, 0.0, 0.0)))
+    assert "pedestal" not in {b.name for b in cell_boxes(flat)}

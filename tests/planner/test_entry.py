@@ -108,8 +108,9 @@ def test_time_law_limits_hold_on_entry_and_exit(dome_plan: PlanResult,
 def test_blocked_entry_is_reported(cell: CellConfig) -> None:
     from tests.planner.test_orientation import _wall_case
 
-    # a layer leaning 25 deg towards the wall, placed near it: the waypoints are reachable
-    # with a tilt, but the pose above the first one on its nozzle axis is out of reach
+    # a layer leaning 25 deg towards the wall, placed near it, the robot on the table (no
+    # pedestal): the waypoints are reachable with a tilt, but the pose above the first one on
+    # its nozzle axis is out of reach
     wall_cell, tp = _wall_case(cell)
     result = plan(tp, wall_cell)
     assert result.report["unreachable"]["count"] == 0

@@ -80,8 +80,8 @@ def test_mesp_plan_fails_with_one_line_when_the_plan_is_not_executable(
     _, tp = _wall_case(cell)
     tp.save(tmp_path)
     cell_file = tmp_path / "near_wall.toml"
-    cell_file.write_text("[placement]\noffset_mm = [80.0, 0.0, 10.0]\nyaw_deg = 0.0\n"
-                         "search = false\n")
+    cell_file.write_text("[robot]\nbase_xyz_mm = [0.0, 0.0, 0.0]\n[placement]\n"
+                         "offset_mm = [80.0, 0.0, 10.0]\nyaw_deg = 0.0\nsearch = false\n")
     code = main(["plan", str(tmp_path), "--cell", str(cell_file), "--quiet", "--no-figures"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 3
