@@ -8,7 +8,7 @@ stage timings are read back from its report.json. Usage:
 
 Prints one row per example: tets, layers, stage timings (median over repeats), peak memory,
 and under it the toolpath quality of the last run (width error per pattern, volume error,
-extrusion starts per layer component).
+extrusion starts per layer component, overall and per pattern, connector volume fraction).
 With --cache DIR the tet mesh of each example is made once (timed, in DIR/<name>.vtu) and
 the repeats slice that mesh, so fTetWild's minutes are not paid per repeat; its time is in
 the first run's `tetrahedralize` column.
@@ -84,6 +84,14 @@ def _quality(tp: dict[str, Any]) -> str:
         parts.append(f"starts/component mean {st['mean_per_component']:.2f} median "
                      f"{st.get('median_per_component', float('nan')):.1f} max "
                      f"{st['max_per_component']}")
+    for pat in ("contour", "stripe"):  # per pattern, from the per-layer statistics
+        per = [s for row in tp.get("per_layer", []) if row.get("pattern") == pat
+               for s in row.get("extrusion_starts", [])]
+        if per:
+            parts.append(f"{pat} starts mean {statistics.mean(per):.2f} median "
+                         f"{statistics.median(per):.1f} max {max(per)}")
+    if "connector_volume_fraction" in tp:
+        parts.append(f"connector volume {tp['connector_volume_fraction']:.3f}")
     return "; ".join(parts)
 
 

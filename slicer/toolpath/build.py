@@ -18,14 +18,16 @@ just printed. Every waypoint carries H (interpolated from the face's vertices), 
 v = f(H / beta) and W = C / (H v), with H clamped to the profile's table (outside it the
 speed saturates and W = C / (H v) would diverge as H -> 0; the clamped H is the one stored, so
 eq. 4 holds per waypoint); travel waypoints copy H, v, W of their neighbour (the planner
-chooses the travel speed). The normal of a surface waypoint is the unit normal of its
-original face, oriented along growth (eq. 16). Open stripe lines that end on the boundary are
-cut back by W / 2 (at most a quarter of their length per end) so their band of material ends
-at the boundary. Thin components: a band with holes whose largest boundary distance is below
-THIN_BAND * W holds one line, printed along its middle (iso-line 1/2 of a harmonic function
-that is 0 on the outer and 1 on the inner boundary loops); when the volume of the regular
-pattern stays off by more than THIN_SHORTFALL, the other pattern and that centre line are
-tried and the closest volume wins (reported as 'thin_fallback'). A component that cannot be
+chooses the travel speed). The normal of a surface waypoint is the unit normal of the
+original layer there, oriented along growth (eq. 16; blended from area-weighted vertex
+normals so that sliver faces do not give normal spikes, mapback.point_normals). Open stripe
+lines that end on the boundary are cut back by W / 2 (at most a quarter of their length per
+end) so their band of material ends at the boundary. Thin components: a band with holes
+whose largest boundary distance is below THIN_BAND * W holds one line, printed along its
+middle (iso-line 1/2 of a harmonic function that is 0 on the outer and 1 on the inner
+boundary loops); when the volume of the regular pattern stays off by more than
+THIN_SHORTFALL, the other pattern and that centre line are tried and the closest volume wins
+(reported as 'thin_fallback'). A component that cannot be
 processed (no boundary, a solver failure) is skipped with its reason in the report instead
 of stopping the whole job.
 
@@ -55,13 +57,20 @@ from slicer.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.linking import (
     LIFT_FACTOR,
+    Joiner,
     Lifter,
     LinkedPath,
     deposit_mask,
     link_pieces,
     mesh_graph,
 )
-from slicer.toolpath.mapback import face_normals, interpolate, map_back
+from slicer.toolpath.mapback import (
+    face_normals,
+    interpolate,
+    map_back,
+    point_normals,
+    vertex_normals,
+)
 from slicer.toolpath.ordering import line_levels, order_lines
 from slicer.toolpath.resample import (
     drop_short_lines,
@@ -413,6 +422,7 @@ class _Component:
         self.width = profile.width(self.height)
         self.w_mean = _mean_width(self.vertices, faces, self.width)
         self.normals = face_normals(self.vertices, faces, self.direction)
+        self.vertex_normals = vertex_normals(self.vertices, faces, self.direction)
         self.graph = mesh_graph(self.vertices, faces)
         self.neighbours = face_neighbours(faces)
 
@@ -470,9 +480,13 @@ class _Component:
         if level_of is not None:
             level = line_levels(lines, interpolate(level_of, self.faces, lines.face, lines.bary))
         factor = self.cfg.join_factor if join is None else join
-        pieces = order_lines(lines, start, level, spacing, factor * w_rs)
+        joiner = Joiner(lines, self.vertices, self.faces, self.graph, w_rs, lifter, factor)
+        if level is None and lines.n_lines:
+            ids = line_index(lines)
+            joiner.prefetch(np.concatenate([ids.start, np.maximum(ids.stop - 1, ids.start)]))
+        pieces = order_lines(lines, start, level, spacing, factor * w_rs, joiner.can_join)
         linked = link_pieces(lines, pieces, self.vertices, self.faces, self.graph, w_rs,
-                             lifter, lift, factor)
+                             lifter, lift, factor, joiner)
         return _Built(lines, linked, self._waypoints(linked))
 
     def _waypoints(self, linked: LinkedPath) -> Waypoints:
@@ -481,7 +495,8 @@ class _Component:
         normal = linked.normal.copy()
         on = linked.face >= 0
         h[on], v[on], w[on] = self.values_at(linked.face[on], linked.bary[on])
-        normal[on] = self.normals[linked.face[on]]
+        normal[on] = point_normals(self.vertex_normals, self.faces, self.normals,
+                                   linked.face[on], linked.bary[on])
         if np.any(~on) and np.any(on):
             # travel points copy the process values of the previous surface point
             src = np.maximum.accumulate(np.where(on, np.arange(n), -1))

@@ -16,6 +16,8 @@ closer to the layer than ``lift``), and plunges onto the next line's start. Trav
 carry extrude=False and a path id of their own; a segment deposits iff both its ends extrude
 and share a path id. Where joins up to 3 W keep a component's volume match from converging,
 ``build`` links it again with 2 W joins and keeps the better match.
+``Joiner`` computes each connector once: the stripe ordering asks it which line ends can be
+joined (``ordering._order_cover``) and the linking reuses the answers.
 """
 
 from __future__ import annotations
@@ -192,6 +194,78 @@ class Lifter:
         return self.clear(line, lift)
 
 
+class Joiner:
+    """On-surface connectors between line points of one component, computed once each.
+
+    ``get(a, b)`` is the extruding connector from line point ``a`` to line point ``b`` (indices
+    into ``lines``) or None when the surface path is longer than ``extrude_factor`` times
+    the mean width at the two points; results are cached (both directions), so the ordering
+    can test a join and the linking reuse it.
+    """
+
+    def __init__(self, lines: SurfaceLines, vertices: NDArray[np.float64],
+                 faces: NDArray[np.int32], mg: MeshGraph, width: NDArray[np.float64],
+                 lifter: Lifter, extrude_factor: float = EXTRUDE_FACTOR) -> None:
+        self.lines = lines
+        self.vertices = vertices
+        self.faces = faces
+        self.mg = mg
+        self.width = width
+        self.lifter = lifter
+        self.extrude_factor = extrude_factor
+        self._cache: dict[tuple[int, int], Connector | None] = {}
+
+    def get(self, a: int, b: int) -> Connector | None:
+        """Connector from point ``a`` to point ``b`` (interior points in that order)."""
+        key = (min(a, b), max(a, b))
+        if key not in self._cache:
+            i, j = key
+            w = 0.5 * (self.width[i] + self.width[j])
+            self._cache[key] = surface_connector(
+                self.mg, self.vertices, self.faces, self.lines.points[i],
+                int(self.lines.face[i]), self.lines.points[j], int(self.lines.face[j]),
+                self.extrude_factor * w, self.lifter)
+        conn = self._cache[key]
+        if conn is None or a <= b:
+            return conn
+        return Connector(conn.points[::-1], conn.face[::-1], conn.bary[::-1], conn.length)
+
+    def prefetch(self, points: NDArray[np.int64]) -> None:
+        """Decide at once, vectorised, the connectors between pairs of ``points`` (indices
+        into ``lines``, e.g. all line ends) that are too long or whose straight chord stays
+        on the layer (the first tests of ``surface_connector``); the others are left to
+        ``get`` (a Dijkstra each)."""
+        pts = np.unique(np.asarray(points, dtype=np.int64))
+        if pts.size < 2:
+            return
+        xyz = self.lines.points[pts]
+        reach = self.extrude_factor * float(self.width[pts].max())
+        pairs = cKDTree(xyz).query_pairs(r=reach, output_type="ndarray")
+        if pairs.size == 0:
+            return
+        i, j = pts[pairs[:, 0]], pts[pairs[:, 1]]  # i < j: pts sorted, pairs i < j
+        pa, pb = self.lines.points[i], self.lines.points[j]
+        chord = np.linalg.norm(pb - pa, axis=1)
+        limit = self.extrude_factor * 0.5 * (self.width[i] + self.width[j])
+        fa, fb = self.faces[self.lines.face[i]], self.faces[self.lines.face[j]]
+        shared = (fa[:, :, None] == fb[:, None, :]).sum(axis=(1, 2))
+        t = np.linspace(0.0, 1.0, 9)[1:-1]
+        samples = (1.0 - t)[None, :, None] * pa[:, None] + t[None, :, None] * pb[:, None]
+        _, near = self.lifter.tree.query(samples.reshape(-1, 3))
+        h = np.einsum("ij,ij->i", samples.reshape(-1, 3) - self.lifter.vertices[near],
+                      self.lifter.normals[near]).reshape(len(i), -1)
+        flat = np.abs(h).max(axis=1) <= CHORD_TOLERANCE * np.maximum(limit, 1.0)
+        empty = (np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros((0, 3)))
+        for k in np.flatnonzero(chord > limit).tolist():
+            self._cache[(int(i[k]), int(j[k]))] = None
+        for k in np.flatnonzero((chord <= limit) & ((shared >= 2) | flat)).tolist():
+            self._cache[(int(i[k]), int(j[k]))] = Connector(*empty, float(chord[k]))
+
+    def can_join(self, a: int, b: int) -> bool:
+        """True if points ``a`` and ``b`` have an extruding connector."""
+        return self.get(a, b) is not None
+
+
 @dataclass(frozen=True, eq=False)
 class LinkedPath:
     """A component's waypoints in print order.
@@ -243,6 +317,7 @@ def link_pieces(
     lifter: Lifter,
     lift: float,
     extrude_factor: float = EXTRUDE_FACTOR,
+    joiner: Joiner | None = None,
 ) -> LinkedPath:
     """Join ``pieces`` (on ``vertices``/``faces``) into paths; see the module rule.
 
@@ -257,7 +332,11 @@ def link_pieces(
         lift: mm, travel clearance above the layer.
         extrude_factor: connectors on the surface up to this times W extrude (default
             ``EXTRUDE_FACTOR``); longer gaps are lifted travel moves (a new start).
+        joiner: connectors already computed for these lines (same width and factor), or
+            None to compute them here.
     """
+    if joiner is None:
+        joiner = Joiner(lines, vertices, faces, mg, width, lifter, extrude_factor)
     pts: list[NDArray[np.float64]] = []
     fcs: list[NDArray[np.int32]] = []
     brs: list[NDArray[np.float64]] = []
@@ -284,10 +363,7 @@ def link_pieces(
         joined = False
         if prev_end is not None:
             w = 0.5 * (width[prev_end] + width[first])
-            conn = surface_connector(
-                mg, vertices, faces, lines.points[prev_end], int(lines.face[prev_end]),
-                lines.points[first], int(lines.face[first]), extrude_factor * w, lifter,
-            )
+            conn = joiner.get(prev_end, first)
             if conn is not None:
                 add(conn.points, conn.face, conn.bary, np.zeros_like(conn.points), True, current)
                 joined = True
