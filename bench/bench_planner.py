@@ -82,14 +82,15 @@ def run_one(tp: Toolpath, cell, source: str) -> dict:  # type: ignore[no-untyped
 def table(rows: list[dict]) -> str:
     """The per-example Markdown table."""
     head = ("| job | waypoints | plan s | wp/s | duration h | speed within 5% | "
-            "min clearance mm | alpha deg | lean deg | unreachable (reasons) |")
-    out = [head, "|" + " --- |" * 10]
+            "over-deposition | min clearance mm | alpha deg | lean deg | unreachable (reasons) |")
+    out = [head, "|" + " --- |" * 11]
     for r in rows:
         reasons = ", ".join(f"{k}: {v}" for k, v in r["unreachable_by_reason"].items())
         out.append(
             f"| {Path(r['source']).name} | {r['waypoints']} | {r['wall_s']:.1f} | "
             f"{r['waypoints_per_s_wall']} | {r['duration_s'] / 3600:.2f} | "
-            f"{100 * r['speed_within_5pct']:.2f}% | {r['min_clearance_mm']:.1f} | "
+            f"{100 * r['speed_within_5pct']:.2f}% | "
+            f"{100 * r['over_deposition']['fraction']:.3f}% | {r['min_clearance_mm']:.1f} | "
             f"{r['alpha_deg']} | {r['lean_deg']} | {r['unreachable']}"
             + (f" ({reasons})" if reasons else "") + " |")
     return "\n".join(out)

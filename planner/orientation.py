@@ -275,6 +275,7 @@ def _viterbi(cost: np.ndarray, grid: np.ndarray, weight: float) -> np.ndarray:
 
 
 REPAIR_ROUNDS = 4  # repair, ramp, re-check: a ramp may break a neighbour, so repeat
+REPAIR_BATCH = 2048  # poses per check while repairing (failing samples x candidates)
 
 
 def _ramp(dev: np.ndarray, per_sample: float) -> np.ndarray:
@@ -388,6 +389,9 @@ def choose(
     pair = ev.pair.copy()
     clearance = ev.clearance.copy()
     spins = np.radians([0.0, 15.0, -15.0, 30.0, -30.0, 60.0, -60.0, 90.0, -90.0])
+    # (C, 3) repair candidates (tilt, lean, spin change), levels first, then spins
+    cand = np.column_stack([np.repeat(levels, len(spins), axis=0),
+                            np.tile(spins, len(levels))])
     # a repair ramps into its neighbours, which may fail in turn: repeat a few rounds
     for round_ in range(REPAIR_ROUNDS):
         bad = np.flatnonzero(status != OK)
@@ -395,18 +399,30 @@ def choose(
             break
         new_psi, new_tilt, new_lean = psi.copy(), tilt.copy(), lean.copy()
         fixed = np.zeros(M, dtype=bool)
-        for tilt_l, lean_l in levels:
-            for spin in spins:
-                rows = bad[~fixed[bad]]
-                if not len(rows):
-                    break
-                t_r, l_r = np.full(len(rows), tilt_l), np.full(len(rows), lean_l)
-                _, e2, _ = evaluate(rows, psi[rows] + spin, t_r, l_r, reach.home, 1)
-                good = e2.status == OK
-                new_psi[rows[good]] = psi[rows[good]] + spin
-                new_tilt[rows[good]] = tilt_l
-                new_lean[rows[good]] = lean_l
-                fixed[rows[good]] = True
+        c0, grow = 0, 1
+        # candidates in order (levels, then spins within a level): each failing sample takes
+        # the first that is OK. They are checked in blocks of candidates x failing samples
+        # that double in size: few samples usually fail, and one call per candidate would
+        # cost mostly overhead, one big block much work on samples an early candidate fixes
+        while c0 < len(cand):  # a loop over blocks of candidates
+            rows = bad[~fixed[bad]]
+            if not len(rows):
+                break
+            b = int(min(grow, max(REPAIR_BATCH // len(rows), 1), len(cand) - c0))
+            grow = 2 * b
+            block = cand[c0:c0 + b]  # (b, 3): tilt, lean, spin
+            c0 += b
+            rr = np.repeat(rows, b)
+            cb = np.tile(block, (len(rows), 1))
+            _, e2, _ = evaluate(rr, psi[rr] + cb[:, 2], cb[:, 0], cb[:, 1], reach.home, 1)
+            good = (e2.status == OK).reshape(len(rows), b)
+            hit = good.any(axis=1)
+            first = block[np.argmax(good, axis=1)[hit]]
+            rows_ok = rows[hit]
+            new_psi[rows_ok] = psi[rows_ok] + first[:, 2]
+            new_tilt[rows_ok] = first[:, 0]
+            new_lean[rows_ok] = first[:, 1]
+            fixed[rows_ok] = True
         if not fixed.any():
             break
         # ramp the changes in and out so the wrist does not jump, then re-check what changed;

@@ -11,6 +11,7 @@ that leaves part of the job unreachable is refused with an ``InputError``.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -128,6 +129,82 @@ def _tangents(toolpath: Toolpath, idx: np.ndarray) -> np.ndarray:
     return t[np.searchsorted(window, idx)]
 
 
+SCORE_BATCH = 4096  # poses per check when scoring the levels beyond -normal
+
+
+class LevelReach(NamedTuple):
+    """How sampled waypoints are reached (``reach_levels``).
+
+    Attributes:
+        level: (S,) int64, index of the first orientation level (0: along -normal) at which
+            some spin reaches the waypoint; -1 if none does.
+        best: (S,) float64, mm, best-spin clearance at that level (-inf if unreachable;
+            -1e9 where reached without a clearance value).
+        first_status: (S,) int64, most frequent failure reason over the spins at level 0 of
+            an unreachable waypoint (0 elsewhere).
+        first_pair: (S,) int64, a collision pair index seen at level 0 there (-1 if none).
+    """
+
+    level: np.ndarray
+    best: np.ndarray
+    first_status: np.ndarray
+    first_pair: np.ndarray
+
+
+def reach_levels(reach: Reach, p: np.ndarray, n: np.ndarray, t: np.ndarray,
+                 extrude: np.ndarray, spins: int = 8, tilt_step_deg: float = 10.0,
+                 lean_step_deg: float = 20.0) -> LevelReach:
+    """The first orientation level (and its best-spin clearance) reaching each waypoint.
+
+    Args:
+        p: (S, 3) float64, mm, nozzle tips in the base frame. n, t: (S, 3) float64, unit
+            normals and motion directions in the base frame. extrude: (S,) bool.
+        spins: rotations about the nozzle axis tried per level.
+    """
+    S = len(p)
+    grid = np.linspace(-np.pi, np.pi, spins, endpoint=False)
+    best = np.full(S, -np.inf)
+    level = np.full(S, -1, dtype=np.int64)
+    first_status = np.zeros(S, dtype=np.int64)
+    first_pair = np.full(S, -1, dtype=np.int64)
+    levels = orientation_levels(reach.cell, alpha_of(-n, t), tilt_step_deg, lean_step_deg)
+    li, grow = 0, 1
+    while li < len(levels):  # a loop over blocks of orientation levels
+        rows = np.flatnonzero(level < 0)
+        if not len(rows):
+            break
+        # level 0 (along -normal) for every waypoint; then the few that fail try the other
+        # levels in blocks that double in size (one check per level would cost mostly call
+        # overhead, one big block much work on waypoints an early level reaches)
+        nb = int(min(grow, max(SCORE_BATCH // (len(rows) * spins), 1), len(levels) - li))
+        grow = 2 * nb if li else 1
+        block = levels[li:li + nb]
+        rr = np.repeat(rows, nb)  # (len(rows) * nb,): waypoint of each (waypoint, level)
+        ax = nozzle_axis(n[rr], t[rr], np.tile(block[:, 0], len(rows)),
+                         np.tile(block[:, 1], len(rows)))
+        R = tool_rotation(np.repeat(ax, spins, axis=0), np.tile(grid, len(rr)))
+        q = reach.solve(np.repeat(p[rr], spins, axis=0), R, reach.home)
+        ev = reach.check(q, iters=8)
+        st = ev.status.reshape(len(rr), spins)
+        st = np.where(alpha_allowed(reach.cell, alpha_of(ax, t[rr]), extrude[rr])[:, None],
+                      st, np.int8(ALPHA))
+        ok = st == OK
+        clear = np.where(ok, np.nan_to_num(ev.clearance, nan=-1e9).reshape(len(rr), spins),
+                         -np.inf)
+        ok_level = ok.any(axis=1).reshape(len(rows), nb)
+        good = ok_level.any(axis=1)
+        first = np.argmax(ok_level, axis=1)  # the first level of the block that reaches
+        best[rows] = clear.max(axis=1).reshape(len(rows), nb)[np.arange(len(rows)), first]
+        level[rows[good]] = li + first[good]
+        if li == 0:
+            fail = st[~good]
+            first_status[rows[~good]] = [np.bincount(f[f != OK]).argmax() for f in fail]
+            pairs = ev.pair.reshape(len(rows), spins)[~good]
+            first_pair[rows[~good]] = pairs.max(axis=1)
+        li += nb
+    return LevelReach(level, best, first_status, first_pair)
+
+
 def score(reach: Reach, toolpath: Toolpath, model_T: np.ndarray, idx: np.ndarray,
           spins: int = 8, tilt_step_deg: float = 10.0,
           lean_step_deg: float = 20.0) -> tuple[int, float, int, int]:
@@ -142,39 +219,11 @@ def score(reach: Reach, toolpath: Toolpath, model_T: np.ndarray, idx: np.ndarray
     p = toolpath.position[idx] @ R_m.T + model_T[:3, 3]
     n = toolpath.normal[idx] @ R_m.T
     t = _tangents(toolpath, idx) @ R_m.T
-    grid = np.linspace(-np.pi, np.pi, spins, endpoint=False)
-    best = np.full(len(idx), -np.inf)
-    reach_ok = np.zeros(len(idx), dtype=bool)
-    tilted = 0
-    first_status = np.zeros(len(idx), dtype=np.int64)
-    first_pair = np.full(len(idx), -1, dtype=np.int64)
-    alpha0 = alpha_of(-n, t)
-    extrude = toolpath.extrude[idx]
-    for li, (tilt_l, lean_l) in enumerate(orientation_levels(reach.cell, alpha0, tilt_step_deg,
-                                                               lean_step_deg)):
-        rows = np.flatnonzero(~reach_ok)
-        if not len(rows):
-            break
-        ax = nozzle_axis(n[rows], t[rows], np.full(len(rows), tilt_l), np.full(len(rows), lean_l))
-        R = tool_rotation(np.repeat(ax, spins, axis=0), np.tile(grid, len(rows)))
-        q = reach.solve(np.repeat(p[rows], spins, axis=0), R, reach.home)
-        ev = reach.check(q, iters=8)
-        st = ev.status.reshape(len(rows), spins)
-        st = np.where(alpha_allowed(reach.cell, alpha_of(ax, t[rows]), extrude[rows])[:, None],
-                      st, np.int8(ALPHA))
-        ok = st == OK
-        clear = np.where(ok, np.nan_to_num(ev.clearance, nan=-1e9).reshape(len(rows), spins),
-                         -np.inf)
-        best[rows] = clear.max(axis=1)
-        good = ok.any(axis=1)
-        reach_ok[rows] = good
-        if li:
-            tilted += int(good.sum())
-        else:
-            fail = st[~good]
-            first_status[rows[~good]] = [np.bincount(f[f != OK]).argmax() for f in fail]
-            pairs = ev.pair.reshape(len(rows), spins)[~good]
-            first_pair[rows[~good]] = pairs.max(axis=1)
+    lv = reach_levels(reach, p, n, t, toolpath.extrude[idx], spins, tilt_step_deg,
+                      lean_step_deg)
+    best, first_status, first_pair = lv.best, lv.first_status, lv.first_pair
+    reach_ok = lv.level >= 0
+    tilted = int((lv.level > 0).sum())
     unreachable = int((~reach_ok).sum())
     first_reason, first_wp = 0, -1
     if unreachable:

@@ -122,7 +122,13 @@ def resample(toolpath: Toolpath, model_T: np.ndarray, cell: CellConfig) -> Sampl
         np.concatenate([seg_of, [N - 2]])[bad], N - 2)]
     waypoint = np.concatenate([np.where(k == 0, seg_of, -1), [N - 1]]).astype(np.int32)
     extrude = np.concatenate([seg_extrude[seg_of], [False]])
-    speed = np.concatenate([seg_v0[seg_of] * (1 - f) + seg_v1[seg_of] * f, [seg_v1[-1]]])
+    # a waypoint sample keeps its own toolpath speed, also where the next segment is a move
+    # between paths: the last step of a path deposits at the path's speed (the travel speed
+    # there would make the time law accelerate on that extruding step); samples inserted on
+    # a move between paths take the travel speed
+    own = np.where(v > 0, v, planning.travel_speed_mm_s)
+    speed = np.concatenate([np.where(k == 0, own[seg_of], seg_v0[seg_of] * (1 - f)
+                                     + seg_v1[seg_of] * f), own[-1:]])
     h = toolpath.height
     height = np.concatenate([h[seg_of] * (1 - f) + h[seg_of + 1] * f, h[-1:]])
     return Samples(tcp, normal, tangent, waypoint, extrude, speed, height)

@@ -146,3 +146,39 @@ def test_tilt_levels_start_at_zero_and_respect_alpha(cell: CellConfig) -> None:
     # a steeply climbing move (alpha0 = 115) needs at least a 5 deg tilt
     climb = np.degrees(tilt_levels(cell, np.radians(np.array([115.0]))))
     assert climb.min() >= 0.0 - 1e-9 and 25.0 in np.round(climb, 9) and 45.0 in np.round(climb, 9)
+
+
+def _along_wall_case(cell: CellConfig) -> tuple[CellConfig, Toolpath, np.ndarray]:
+    """A line along the +x tank wall, 60 mm from it, normals +z except a middle stretch
+    leaning 25 deg towards the wall (the nozzle must lean back there). Returns the cell,
+    the toolpath and the model transform (mm)."""
+    wall_cell, line = _wall_case(cell)
+    lean = np.radians(25.0)
+    y = np.arange(-10.0, 10.0 + 1e-9, 0.5)
+    pos = np.stack([np.full_like(y, 20.0), y, np.full_like(y, 15.0 - 20.0 * np.tan(lean))], 1)
+    normal = np.tile([0.0, 0.0, 1.0], (len(y), 1))
+    normal[15:26] = [np.sin(lean), 0.0, np.cos(lean)]
+    tp = make_toolpath(pos, normal, np.zeros(len(y), np.int32))
+    model_T = model_transform(wall_cell, (line.position.min(0), line.position.max(0)),
+                              np.array(wall_cell.placement.offset_mm), 0.0)
+    return wall_cell, tp, model_T
+
+
+def test_batched_repair_picks_the_same_candidates_as_one_at_a_time(
+    cell: CellConfig, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    import planner.orientation as orientation
+
+    wall_cell, tp, model_T = _along_wall_case(cell)
+    reach = Reach(wall_cell)
+    s = resample(tp, model_T, wall_cell)
+    args = (reach, s.tcp, s.normal, s.tangent, s.extrude)
+    # the coarse spin search (first and last sample only) misses the leaning stretch: the
+    # repair must find the leans
+    batched = orientation.choose(*args, coarse=2)
+    monkeypatch.setattr(orientation, "REPAIR_BATCH", 1)  # one candidate per check
+    single = orientation.choose(*args, coarse=2)
+    assert np.any(np.abs(batched.lean) > 1e-6)  # the wall forced repairs
+    assert np.all(batched.status == OK)
+    for name in ("q", "psi", "tilt", "lean", "status"):
+        assert np.array_equal(getattr(batched, name), getattr(single, name)), name

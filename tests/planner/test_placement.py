@@ -50,3 +50,30 @@ def test_model_taller_than_gel_is_refused(cell: CellConfig) -> None:
     tall = synthetic.spiral(turns=2.0, radius=20.0, height=cell.tank.gel_fill_mm)
     with pytest.raises(InputError, match="gel"):
         choose_placement(Reach(cell), tall)
+
+
+def test_batched_level_search_equals_level_by_level(cell: CellConfig,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    import planner.placement as placement
+    from tests.planner.test_orientation import _along_wall_case
+
+    wall_cell, tp, model_T = _along_wall_case(cell)  # some waypoints need a lean
+    reach = Reach(wall_cell)
+    idx = np.arange(len(tp))
+    R = model_T[:3, :3]
+    p = tp.position @ R.T + model_T[:3, 3]
+    t = placement.waypoint_tangents(tp.position, tp.path) @ R.T
+    args = (reach, p, tp.normal @ R.T, t, tp.extrude)
+    levels = placement.orientation_levels
+    for repeat in range(4):  # level 0 repeated: the first reaching level moves within blocks
+        monkeypatch.setattr(placement, "orientation_levels", lambda *a, k=repeat: np.concatenate(
+            [np.repeat(levels(*a)[:1], k, axis=0), levels(*a)]))
+        monkeypatch.setattr(placement, "SCORE_BATCH", 4096)
+        batched = placement.reach_levels(*args)
+        s_batched = placement.score(reach, tp, model_T, idx)
+        monkeypatch.setattr(placement, "SCORE_BATCH", 1)  # one level per check
+        single = placement.reach_levels(*args)
+        assert np.array_equal(batched.level, single.level)
+        assert np.array_equal(batched.best, single.best)
+        assert np.all(batched.level >= 0) and np.any(batched.level > 1)  # beyond block 1
+        assert s_batched == placement.score(reach, tp, model_T, idx)

@@ -88,3 +88,24 @@ def test_null_space_motion_only_spins_the_tool() -> None:
     w = twist[:, 3:]
     assert np.allclose(np.cross(w, a), 0.0, atol=1e-10)  # it turns about the nozzle axis
     assert np.all(np.linalg.norm(w, axis=1) > 0)
+
+
+def test_last_step_of_each_path_keeps_the_toolpath_speed(lines_plan: PlanResult,
+                                                         lines_tp: Toolpath) -> None:
+    # the move to the next path runs at the travel speed; the path's own last (extruding)
+    # step must not: it deposits at constant C, so it keeps the toolpath speed
+    tr, sm = lines_plan.trajectory, lines_plan.samples
+    wp = tr.waypoint
+    is_wp = wp >= 0
+    assert np.allclose(sm.speed[is_wp], lines_tp.speed[wp[is_wp]])
+    path = lines_tp.path
+    last = np.flatnonzero(np.r_[path[1:] != path[:-1], True])  # last waypoint of each path
+    rows = np.flatnonzero(np.isin(wp, last) & is_wp)
+    rows = rows[rows > 0]
+    assert len(rows) == len(last)
+    assert tr.extrude[rows - 1].all()  # the step into the path's last waypoint deposits
+    v = np.linalg.norm(tr.tcp[rows] - tr.tcp[rows - 1], axis=1) / (tr.t[rows] - tr.t[rows - 1])
+    target = lines_tp.speed[wp[rows]]
+    # the job's very last step ends at rest (half speed on average); every other one is exact
+    assert np.all(np.abs(v[:-1] / target[:-1] - 1.0) < 0.05)
+    assert lines_plan.report["speed_ratio"]["within_5pct"] > 0.97
