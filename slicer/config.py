@@ -132,6 +132,7 @@ class ToolpathConfig:
     join_factor: float = 3.0
     fit_bands: bool = True
     flush: bool = True
+    stripe_perimeter: bool = False
 
     def __post_init__(self) -> None:
         if not 1.0 <= self.join_factor <= 20.0:

@@ -22,7 +22,10 @@ chooses the travel speed). The normal of a surface waypoint is the unit normal o
 original layer there, oriented along growth (eq. 16; blended from area-weighted vertex
 normals so that sliver faces do not give normal spikes, mapback.point_normals). Open stripe
 lines that end on the boundary are cut back by W / 2 (at most a quarter of their length per
-end) so their band of material ends at the boundary. Thin components: a band with holes
+end) so their band of material ends at the boundary. On stripe layers with
+``stripe_perimeter`` one loop at spacing / 2 inside the boundary is added, printed first,
+and the stripes are clipped PERIMETER_CLIP spacings inside the boundary (perimeter.py); the
+loop is part of the volume match. Thin components: a band with holes
 whose largest boundary distance is below THIN_BAND * W holds one line, printed along its
 middle (iso-line 1/2 of a harmonic function that is 0 on the outer and 1 on the inner
 boundary loops); when the volume of the regular pattern stays off by more than
@@ -271,7 +274,7 @@ class _Surface:
     """What the line generators need of one (possibly deformed) component surface."""
 
     def __init__(self, vertices: NDArray[np.float64], faces: NDArray[np.int32],
-                 fit_bands: bool = True) -> None:
+                 fit_bands: bool = True, perimeter: bool = False) -> None:
         from slicer.toolpath.geodesic import boundary_distance
 
         self.vertices = vertices
@@ -280,6 +283,7 @@ class _Surface:
         self.max_distance = float(self.distance.max()) if len(self.distance) else 0.0
         self._direction: NDArray[np.float64] | None = None
         self.fit_bands = fit_bands
+        self.perimeter = perimeter
         self._sides: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
         self._smoother: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
 
@@ -381,7 +385,17 @@ class _Surface:
         from slicer.toolpath.stripes import poisson_stripe_lines, stripe_lines
 
         fn = poisson_stripe_lines if poisson else stripe_lines
-        return fn(self.vertices, self.faces, self.direction, spacing)
+        stripes = fn(self.vertices, self.faces, self.direction, spacing)
+        if not self.perimeter:
+            return stripes
+        from slicer.toolpath.lines import merge_lines
+        from slicer.toolpath.perimeter import PERIMETER_CLIP, clip_lines, perimeter_loop
+
+        loop = perimeter_loop(self.vertices, self.faces, self.distance, spacing)
+        inner = clip_lines(stripes, self.vertices, self.faces, self.distance,
+                           PERIMETER_CLIP * spacing)
+        ident = np.arange(len(self.faces))
+        return merge_lines([loop, inner], [ident, ident])
 
 
 def _measure(lines: SurfaceLines, width_pt: NDArray[np.float64],
@@ -484,7 +498,9 @@ class _Component:
         if level is None and lines.n_lines:
             ids = line_index(lines)
             joiner.prefetch(np.concatenate([ids.start, np.maximum(ids.stop - 1, ids.start)]))
-        pieces = order_lines(lines, start, level, spacing, factor * w_rs, joiner.can_join)
+        pieces = order_lines(lines, start, level, spacing, factor * w_rs, joiner.can_join,
+                             closed_first=self.cfg.stripe_perimeter
+                             and self.pattern == PATTERN_STRIPE)
         linked = link_pieces(lines, pieces, self.vertices, self.faces, self.graph, w_rs,
                              lifter, lift, factor, joiner)
         return _Built(lines, linked, self._waypoints(linked))
@@ -554,7 +570,8 @@ def _component_toolpath_unsafe(
     timings["deform"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    surf = _Surface(deformed, comp.faces, cfg.fit_bands)
+    perimeter = cfg.stripe_perimeter and pattern == PATTERN_STRIPE
+    surf = _Surface(deformed, comp.faces, cfg.fit_bands, perimeter)
     timings["distance"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -627,7 +644,8 @@ def _component_toolpath_unsafe(
         if deformed is comp.vertices or fallback == "centre-line":
             b = built  # no deformation (or one line): the direct lines are the lines
         else:
-            b = run(_Surface(comp.vertices, comp.faces, cfg.fit_bands), used, match.tau).result
+            b = run(_Surface(comp.vertices, comp.faces, cfg.fit_bands, perimeter), used,
+                    match.tau).result
         err_undeformed = _measure(b.lines, comp.values_at(b.lines.face, b.lines.bary)[2],
                                   comp.normals[b.lines.face])
         if used == PATTERN_STRIPE:

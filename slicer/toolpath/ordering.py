@@ -278,13 +278,15 @@ def _shorten(partner: NDArray[np.int64], n: int, cand: list[list[int]],
 
 def _order_cover(lines: SurfaceLines, start_pos: NDArray[np.float64],
                  reach: NDArray[np.float64],
-                 can_join: Callable[[int, int], bool] | None = None) -> list[Piece]:
+                 can_join: Callable[[int, int], bool] | None = None,
+                 closed_first: bool = False) -> list[Piece]:
     """Stripes as a path cover: lines are edges between their two end nodes; joins pair
     ends (``_match_ends``: each end at most once, never closing a cycle) so that the chains
     of lines cover the component with few starts. ``can_join(point_a, point_b)`` (point
     indices of two line ends) may veto a join, e.g. one without a short on-surface
     connector. The chains are printed nearest-neighbour first (each entered at its nearer
-    end; closed lines at their nearest point).
+    end; closed lines at their nearest point). ``closed_first``: a closed line (a stripe
+    layer's perimeter loop) before the chains, left next to a chain end.
     """
     idx = line_index(lines)
     n = lines.n_lines
@@ -330,6 +332,7 @@ def _order_cover(lines: SurfaceLines, start_pos: NDArray[np.float64],
     tails = np.array([lines.points[c[-1].points[-1]] for c in chains]).reshape(-1, 3)
     todo = np.ones(len(chains), dtype=bool)
     pieces: list[Piece] = []
+    first_loop = closed_first
     while todo.any() or closed_todo.size:
         best, best_d, flip = -1, np.inf, False
         if todo.any():
@@ -338,6 +341,22 @@ def _order_cover(lines: SurfaceLines, start_pos: NDArray[np.float64],
             dt = np.linalg.norm(tails[left] - pos, axis=1)
             k = int(np.argmin(np.minimum(dh, dt)))
             best, best_d, flip = int(left[k]), float(min(dh[k], dt[k])), bool(dt[k] < dh[k])
+        if first_loop and closed_todo.size and todo.any():
+            # one loop first, entered (and left) where it comes closest to a chain end, so
+            # the connector from it into the chains is short enough to extrude; further
+            # loops (around holes) follow nearest-neighbour among the chains
+            first_loop = False
+            left = np.flatnonzero(todo)
+            chain_ends = np.concatenate([heads[left], tails[left]])
+            gaps = [cKDTree(lines.points[idx.start[c]:idx.stop[c]]).query(chain_ends)[0]
+                    for c in closed_todo.tolist()]
+            k = int(np.argmin([g.min() for g in gaps]))
+            line = int(closed_todo[k])
+            piece, pos = _piece(lines, int(idx.start[line]), int(idx.stop[line]), line,
+                                chain_ends[int(np.argmin(gaps[k]))])
+            pieces.append(piece)
+            closed_todo = np.delete(closed_todo, k)
+            continue
         if closed_todo.size:
             dc = _entry_distance(lines, idx.start, idx.stop, closed_todo, pos)
             k = int(np.argmin(dc))
@@ -363,6 +382,7 @@ def order_lines(
     level_step: float = 1.0,
     reach: NDArray[np.float64] | None = None,
     can_join: Callable[[int, int], bool] | None = None,
+    closed_first: bool = False,
 ) -> list[Piece]:
     """Order all lines; contours by ``level`` (outside-in), then nearest neighbour.
 
@@ -376,12 +396,13 @@ def order_lines(
             stripes (level None) follow ``_order_cover``; without, pure nearest neighbour.
         can_join: (point a, point b) -> bool, whether two line ends may be joined by an
             extruding connector (``linking.Joiner.can_join``); None: any within reach.
+        closed_first: stripes with ``reach``: a closed line (a perimeter loop) first.
 
     Returns:
         The pieces in print order.
     """
     if level is None and reach is not None:
-        return _order_cover(lines, start_pos, reach, can_join)
+        return _order_cover(lines, start_pos, reach, can_join, closed_first)
     idx = line_index(lines)
     n = lines.n_lines
     alive = idx.stop > idx.start

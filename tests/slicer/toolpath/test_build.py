@@ -83,6 +83,12 @@ def discs() -> tuple[Layers, ToolpathResult]:
 
 
 @pytest.fixture(scope="module")
+def discs_perimeter() -> ToolpathResult:
+    config = JobConfig().with_overrides(toolpath={"stripe_perimeter": True})
+    return compute_toolpath(disc_stack(4), config, PROFILE, workers=1)
+
+
+@pytest.fixture(scope="module")
 def caps() -> tuple[Layers, ToolpathResult]:
     layers = cap_stack(2)
     return layers, compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False,
@@ -243,8 +249,10 @@ def test_heights_outside_profile_are_clamped() -> None:
     assert res.report["height_out_of_profile_fraction"] > 0
 
 
-def test_stripes_stop_half_a_width_inside(discs: tuple[Layers, ToolpathResult]) -> None:
-    tp = discs[1].toolpath
+def test_stripes_stop_half_a_width_inside() -> None:
+    config = JobConfig().with_overrides(toolpath={"stripe_perimeter": False})
+    tp = compute_toolpath(disc_stack(2), config, PROFILE, measure_baselines=False,
+                          workers=1).toolpath
     sel = tp.extrude & (tp.pattern == PATTERN_STRIPE)
     gap = 12.0 - np.linalg.norm(tp.position[sel, :2], axis=1)
     # the outermost material band (W / 2 each side of the line) ends at the boundary; a
@@ -253,6 +261,34 @@ def test_stripes_stop_half_a_width_inside(discs: tuple[Layers, ToolpathResult]) 
     assert np.percentile(ratio, 2) >= 0.35
     assert ratio.min() > 0.05
     assert ratio.min() < 0.6
+
+
+def test_stripe_layer_has_a_perimeter_loop(discs_perimeter: ToolpathResult) -> None:
+    """stripe_perimeter: a stripe layer of a flat disc gets one loop half a spacing inside
+    the boundary, all the way round, and no stripe comes closer to the boundary than about a
+    spacing (the loop's band lies between)."""
+    res = discs_perimeter
+    tp = res.toolpath
+    for stat in res.layer_stats:
+        if stat["pattern"] != "stripe":
+            continue
+        sel = tp.extrude & (tp.layer == stat["layer"])
+        assert np.all(tp.pattern[sel] == PATTERN_STRIPE)
+        pos, w = tp.position[sel], tp.width[sel]
+        half = 0.5 * stat["tau"][0] * w  # spacing / 2
+        gap = 12.0 - np.linalg.norm(pos[:, :2], axis=1)
+        assert gap.min() > 0.4 * w.min()
+        ring = np.abs(gap - half) < 0.15 * w
+        # the loop: all the way round, and nothing else between it and the stripes
+        angle = np.arctan2(pos[ring, 1], pos[ring, 0])
+        assert np.all(np.histogram(angle, bins=36, range=(-np.pi, np.pi))[0] > 0)
+        assert np.all(gap[~ring] > 0.9 * w[~ring])
+        # the loop runs along one iso-distance: its points are not scattered radially
+        assert np.ptp(gap[ring] / w[ring]) < 0.25
+        # one extrusion start per component: the loop is joined to the stripes
+        assert stat["extrusion_starts"] == [1]
+        # the volume match covers loop and stripes
+        assert abs(stat["deposited_mm3"] / stat["required_mm3"] - 1) < 0.02
 
 
 def test_thin_band_gets_a_centre_line() -> None:
