@@ -37,7 +37,7 @@ from numpy.typing import NDArray
 from slicer.toolpath.isolines import iso_lines
 from slicer.toolpath.lines import SurfaceLines, empty_lines
 from slicer.toolpath.mapback import interpolate
-from slicer.toolpath.resample import _common_face, face_neighbours, line_index
+from slicer.toolpath.resample import common_face, face_neighbours, line_index
 
 PERIMETER_CLIP = 1.5  # stripes are clipped where the boundary distance < this x spacing
 
@@ -91,7 +91,7 @@ def clip_lines(lines: SurfaceLines, vertices: NDArray[np.float64], faces: NDArra
     seg = np.flatnonzero((line[1:] == line[:-1]) & (inside[1:] != inside[:-1]))
     t = (threshold - d[seg]) / (d[seg + 1] - d[seg])
     t = np.clip(t, 0.0, 1.0)
-    cf, ba, bb, ok = _common_face(pts[seg], pts[seg + 1], face[seg], face[seg + 1],
+    cf, ba, bb, ok = common_face(pts[seg], pts[seg + 1], face[seg], face[seg + 1],
                                   vertices, faces, neighbours)
     c_bary = (1.0 - t)[:, None] * ba + t[:, None] * bb
     c_face = cf.copy()

@@ -60,7 +60,7 @@ def face_neighbours(faces: NDArray[np.int32]) -> NDArray[np.int64]:
     return out.reshape(m, 3)
 
 
-def _common_face(
+def common_face(
     pa: NDArray[np.float64], pb: NDArray[np.float64], fa: NDArray[np.int32],
     fb: NDArray[np.int32], vertices: NDArray[np.float64], faces: NDArray[np.int32],
     neighbours: NDArray[np.int64],
@@ -173,7 +173,7 @@ def resample_lines(
     a, b = aug[seg], aug[np.minimum(seg + 1, len(aug) - 1)]
     if neighbours is None:
         neighbours = face_neighbours(faces)
-    face, bary_a, bary_b, ok = _common_face(
+    face, bary_a, bary_b, ok = common_face(
         lines.points[a], lines.points[b], lines.face[a], lines.face[b], vertices, faces,
         neighbours,
     )
