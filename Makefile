@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup demo test lint bench clean
+.PHONY: setup demo test lint bench clean baselines
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -18,7 +18,21 @@ demo: $(STAMP)            ## set up, then run the main job on the bundled exampl
 	$(BIN)/mesp demo
 
 test: $(STAMP)            ## set up, then run the whole test suite
+	@$(MAKE) --no-print-directory baselines || \
+		echo "make baselines failed: the PrusaSlicer baseline tests will skip"
 	$(BIN)/python -m pytest -q
+
+# PrusaSlicer, the commercial planar slicer of `mesp inspect DIR --baseline prusaslicer`.
+baselines:                ## install prusa-slicer when it is missing (Debian/Ubuntu, as root)
+	@if command -v prusa-slicer >/dev/null 2>&1; then \
+		echo "prusa-slicer: $$(command -v prusa-slicer)"; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		export DEBIAN_FRONTEND=noninteractive; \
+		apt-get install -y --no-install-recommends prusa-slicer || \
+			{ apt-get update && apt-get install -y --no-install-recommends prusa-slicer; }; \
+	else \
+		echo "prusa-slicer is missing: sudo apt-get install prusa-slicer (until then the PrusaSlicer baseline tests skip)"; \
+	fi
 
 lint: $(STAMP)
 	$(BIN)/ruff check slicer planner sim mesp_cell tests bench examples

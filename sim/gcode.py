@@ -222,12 +222,22 @@ def _to_toolpath(rows: NDArray[np.float64], opt: GcodeOptions) -> Toolpath:
     )
 
 
-def align_to_bounds(toolpath: Toolpath, bounds: NDArray[np.float64]) -> Toolpath:
+def align_to_bounds(toolpath: Toolpath, bounds: NDArray[np.float64],
+                    slab_middle: bool = False) -> Toolpath:
     """Shift a bed-frame toolpath onto a model: centre in x, y; first layer's bottom on z min.
+
+    A G-code Z is the nozzle height, the top of its layer (the slicer cut that layer's
+    section at Z - H / 2). ``sim.deposition`` centres each filament on the nozzle tip, the
+    convention of the curved toolpath and of ``sim.baseline`` (waypoints on the middle of their
+    slab). With ``slab_middle`` the print is lowered by half the first layer's height more, so
+    every layer is deposited around the plane its section was cut at, as in an embedded print
+    (no bed: the whole print may float H / 2 lower). Without it (the default) the layer tops
+    stay where a bed printer puts them.
 
     Args:
         toolpath: e.g. from ``read_gcode`` (coordinates of the printer bed).
         bounds: (2, 3) float64, mm, the model's min and max corners.
+        slab_middle: put the waypoints on the middle of their layer slab (see above).
     """
     b = np.asarray(bounds, dtype=np.float64)
     p = toolpath.position
@@ -236,6 +246,8 @@ def align_to_bounds(toolpath: Toolpath, bounds: NDArray[np.float64]) -> Toolpath
     first = toolpath.layer == toolpath.layer.min()
     bottom = float((p[first, 2] - toolpath.height[first]).min())
     shift[2] = b[0, 2] - bottom
+    if slab_middle:
+        shift[2] -= 0.5 * float(np.median(toolpath.height[first]))
     arrays = toolpath.arrays()
     arrays["position"] = p + shift
     return Toolpath(**arrays)

@@ -8,7 +8,8 @@ so a surface through voxel centres is not counted as a whole voxel in or out; V_
 * pore ratio = gel volume inside the printed body / V_m, where the printed body is the solid
   (f >= 0.5) closed over narrow openings (``scan_bridge_mm``) with its cavities filled, minus
   its one-voxel skin (a CT sees the skin's partial voxels as surface roughness, not
-  porosity); the gel there is sum of (1 - f).
+  porosity), and only where the model is solid (a cavity of the design is not a pore); the
+  gel there is sum of (1 - f).
 * over-deposition = ink beyond the model's share (sum of f - min(f, m)) / V_m;
   under-deposition = 1 - infill ratio.
 * surface error: distance from the printed body's outer surface (the f = 0.5 iso-surface of the
@@ -170,7 +171,9 @@ def inspect_deposit(deposit: Deposit, vertices: NDArray[np.float64],
     # Like a scan: openings narrower than ~2 * scan_bridge_mm are bridged, then cavities filled.
     bridge = round(scan_bridge_mm / grid.voxel)
     body = ndimage.binary_fill_holes(closing_cube(solid, bridge) | solid)
-    core = ndimage.binary_erosion(body)
+    # gel counts only where the model is solid: a cavity of the design (the membrane's air
+    # chamber) is enclosed by the print too, but it is not a defect
+    core = ndimage.binary_erosion(body) & inside
     gel = np.where(core, 1.0 - f, 0.0)
     pores = core & ~solid
     pore = float(gel.sum(dtype=np.float64)) * vv

@@ -132,7 +132,8 @@ class ToolpathConfig:
     join_factor: float = 3.0
     fit_bands: bool = True
     flush: bool = True
-    stripe_perimeter: bool = False
+    stripe_perimeter: bool = True
+    first_layer_beta: float = 0.0
 
     def __post_init__(self) -> None:
         if not 1.0 <= self.join_factor <= 20.0:
@@ -145,6 +146,8 @@ class ToolpathConfig:
             raise ValueError("volume_tolerance must be in (0, 0.2)")
         if self.min_path_length_mm < 0:
             raise ValueError("min_path_length_mm must be >= 0")
+        if self.first_layer_beta != 0.0 and not 0.3 <= self.first_layer_beta <= 1.0:
+            raise ValueError("first_layer_beta must be 0 (the profile's beta) or in [0.3, 1]")
 
 
 @dataclass(frozen=True)

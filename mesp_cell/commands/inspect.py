@@ -28,8 +28,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "per-layer over/under-deposition. Optionally the same for a planar baseline "
             "(--baseline planar: planar layers at the job's median layer height, in both line "
             "width modes, overlap W = beta w_f and volume-preserving W = C / (H v), the latter "
-            "flushed like a curved job when DIR has tetmesh.npz; the better one is the baseline) "
-            "or a commercial slicer's G-code (--gcode FILE), side by side. "
+            "flushed like a curved job when DIR has tetmesh.npz; the better one is the baseline), "
+            "PrusaSlicer's print of DIR/model.ply (--baseline prusaslicer: same layer height, "
+            "lines at the overlap W = beta w_f, one constant speed, 100% rectilinear infill, "
+            "G-code written to DIR/baseline_prusaslicer.gcode; `make baselines` installs "
+            "PrusaSlicer) or a commercial slicer's G-code (--gcode FILE), side by side. "
             "Adds an 'inspect' section to DIR/report.json and writes inspect_*.png into DIR."
         ),
     )
@@ -38,8 +41,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"voxel edge in mm (default {DEFAULT_VOXEL_MM}, coarser for models too "
                         f"large for {AUTO_VOXEL_BUDGET:,} voxels)")
     group = p.add_mutually_exclusive_group()
-    group.add_argument("--baseline", choices=["planar"],
-                       help="also print the model with planar layers and compare")
+    group.add_argument("--baseline", choices=["planar", "prusaslicer"],
+                       help="also print the model with planar layers (our planar slicer, or "
+                            "PrusaSlicer's CLI on the job's model) and compare")
     group.add_argument("--gcode", type=Path, metavar="FILE",
                        help="also print this planar G-code (Cura/PrusaSlicer) and compare")
     p.add_argument("--profile", default=None, metavar="NAME",
@@ -48,10 +52,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="planar baseline layer height (default: median toolpath height)")
     p.add_argument("--baseline-beta", type=float, default=None, metavar="B",
                    help="planar baseline overlap ratio (default: sqrt(pi)/2, volume-matching, "
-                        "in overlap mode; the profile's beta in volume mode)")
+                        "in overlap mode and for PrusaSlicer; the profile's beta in volume "
+                        "mode)")
     p.add_argument("--baseline-width", choices=["overlap", "volume", "both"], default="both",
                    help="planar baseline line width rule: W = beta w_f (overlap), "
-                        "W = C / (H v) (volume), or both, keeping the better (default both)")
+                        "W = C / (H v) (volume), or both, keeping the better (default both; "
+                        "PrusaSlicer always uses overlap)")
     p.add_argument("--flush", action="store_true",
                    help="first move the job's exposed waypoints inwards so filaments are flush "
                         "with the model (slicer.toolpath.flush; needs DIR/tetmesh.npz; ignored "
@@ -77,7 +83,10 @@ def run(args: argparse.Namespace) -> int:
     if not (job / Toolpath.FILE).is_file():
         raise InputError(f"{job} has no {Toolpath.FILE}", f"run mesp slice MODEL --out {job}")
     if not (job / "model.ply").is_file():
-        raise InputError(f"{job} has no model.ply", f"re-run mesp slice MODEL --out {job}")
+        # The model as sliced (mm, model frame): metrics and PrusaSlicer both need it.
+        source = read_report(job).get("job", {}).get("model_file") or "MODEL"
+        raise InputError(f"{job} has no model.ply (the model as mesp slice read it)",
+                         f"re-run mesp slice {source} --out {job}")
     if args.voxel is not None and not (np.isfinite(args.voxel) and 0.01 <= args.voxel <= 10.0):
         raise InputError(f"--voxel {args.voxel} is out of range", "use 0.01 to 10 mm, e.g. 0.25")
     if args.flush and not (job / "tetmesh.npz").is_file():
@@ -91,6 +100,13 @@ def run(args: argparse.Namespace) -> int:
                                 ("--baseline-beta", args.baseline_beta, 0.1, 1.0)):
         if value is not None and not lo <= value <= hi:
             raise InputError(f"{name} {value} is out of range", f"use {lo} to {hi}")
+    if args.baseline == "prusaslicer":
+        from sim.baseline import VOLUME_MATCHING_BETA
+        from sim.commercial import PrusaConfig, find_prusaslicer
+
+        # Before minutes of simulation, not after: PrusaSlicer is there, beta is in its range.
+        find_prusaslicer()
+        PrusaConfig(beta=args.baseline_beta or VOLUME_MATCHING_BETA)
     console = ConsoleProgress(quiet=args.quiet)
     timer = StageTimer(console)
     with timer.stage("load"):
@@ -117,6 +133,13 @@ def run(args: argparse.Namespace) -> int:
         with timer.stage("baseline toolpath"):
             base_tp, base_info = _gcode_toolpath(args, morphology, vertices)
         base = _simulate("baseline", base_tp, morphology, vertices, faces, config, timer)
+        section["baseline"] = {**base_info, **base["summary"]}
+    elif args.baseline == "prusaslicer":
+        with timer.stage("baseline toolpath (prusaslicer)"):
+            base_tp, base_info = _prusaslicer_toolpath(args, job, toolpath, morphology,
+                                                       vertices, faces)
+        base = _simulate("baseline prusaslicer", base_tp, morphology, vertices, faces, config,
+                         timer)
         section["baseline"] = {**base_info, **base["summary"]}
     elif args.baseline:
         modes = ["overlap", "volume"] if args.baseline_width == "both" else [args.baseline_width]
@@ -230,7 +253,34 @@ def _gcode_toolpath(args: argparse.Namespace, morphology: Any, vertices: np.ndar
                         rate_mm3_s=float(morphology.rate_mm3_s))
     tp = read_gcode(args.gcode, opts)
     bounds = np.stack([vertices.min(axis=0), vertices.max(axis=0)])
-    return align_to_bounds(tp, bounds), {"kind": "gcode", "file": str(args.gcode)}
+    # Filaments centred on the nozzle tip (sim.deposition): each layer around its cut plane.
+    return align_to_bounds(tp, bounds, slab_middle=True), {"kind": "gcode",
+                                                           "file": str(args.gcode)}
+
+
+def _baseline_height(args: argparse.Namespace, toolpath: Any) -> float:
+    """--baseline-height, else the median layer height of the job's extruding waypoints."""
+    ext = toolpath.extrude
+    return float(args.baseline_height or (np.median(toolpath.height[ext]) if ext.any()
+                                          else 0.6))
+
+
+def _prusaslicer_toolpath(args: argparse.Namespace, job: Path, toolpath: Any, morphology: Any,
+                          vertices: np.ndarray, faces: np.ndarray
+                          ) -> tuple[Any, dict[str, Any]]:
+    """PrusaSlicer's print of the job's model (sim.commercial), moved onto the model."""
+    from sim.baseline import VOLUME_MATCHING_BETA
+    from sim.commercial import PrusaConfig, slice_with_prusaslicer
+    from slicer.report import read_report
+
+    cfg = PrusaConfig(layer_height_mm=_baseline_height(args, toolpath),
+                      beta=args.baseline_beta or VOLUME_MATCHING_BETA)
+    result = slice_with_prusaslicer(vertices, faces, morphology, cfg, job)
+    info = result.info()
+    # model.ply is the job's model as mesp slice read it (mm, model frame); name its source.
+    source = read_report(job).get("job", {}).get("model_file")
+    info["model_source"] = f"model.ply (from {source})" if source else "model.ply"
+    return result.toolpath, info
 
 
 def _planar_toolpath(args: argparse.Namespace, job: Path, mode: str, toolpath: Any,
@@ -239,9 +289,7 @@ def _planar_toolpath(args: argparse.Namespace, job: Path, mode: str, toolpath: A
     """Planar baseline in one width mode, flushed like a curved job when the tets are there."""
     from sim.baseline import VOLUME_MATCHING_BETA, PlanarConfig, planar_toolpath
 
-    ext = toolpath.extrude
-    height = args.baseline_height or (float(np.median(toolpath.height[ext])) if ext.any()
-                                      else 0.6)
+    height = _baseline_height(args, toolpath)
     default_beta = VOLUME_MATCHING_BETA if mode == "overlap" else float(
         getattr(morphology, "beta", VOLUME_MATCHING_BETA))
     beta = args.baseline_beta or default_beta

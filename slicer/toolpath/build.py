@@ -24,8 +24,9 @@ normals so that sliver faces do not give normal spikes, mapback.point_normals). 
 lines that end on the boundary are cut back by W / 2 (at most a quarter of their length per
 end) so their band of material ends at the boundary. On stripe layers with
 ``stripe_perimeter`` one loop at spacing / 2 inside the boundary is added, printed first,
-and the stripes are clipped PERIMETER_CLIP spacings inside the boundary (perimeter.py); the
-loop is part of the volume match. Thin components: a band with holes
+and the stripes are clipped PERIMETER_CLIP spacings inside the boundary (perimeter.py; only
+on components wider than PERIMETER_MIN_DISTANCE spacings from the boundary); the loop is part
+of the volume match. Thin components: a band with holes
 whose largest boundary distance is below THIN_BAND * W holds one line, printed along its
 middle (iso-line 1/2 of a harmonic function that is 0 on the outer and 1 on the inner
 boundary loops); when the volume of the regular pattern stays off by more than
@@ -386,7 +387,9 @@ class _Surface:
 
         fn = poisson_stripe_lines if poisson else stripe_lines
         stripes = fn(self.vertices, self.faces, self.direction, spacing)
-        if not self.perimeter:
+        from slicer.toolpath.perimeter import PERIMETER_MIN_DISTANCE
+
+        if not self.perimeter or self.max_distance < PERIMETER_MIN_DISTANCE * spacing:
             return stripes
         from slicer.toolpath.lines import merge_lines
         from slicer.toolpath.perimeter import PERIMETER_CLIP, clip_lines, perimeter_loop
@@ -676,8 +679,12 @@ def _component_toolpath_unsafe(
 
 def layer_toolpath(layer: LayerMesh, pattern: int, cfg: ToolpathConfig,
                    profile: ExtrusionProfile, measure_baselines: bool = True) -> LayerResult:
-    """All components of one layer in nearest-neighbour order, joined by travel moves."""
+    """All components of one layer in nearest-neighbour order, joined by travel moves.
+    Layer 0 uses ``cfg.first_layer_beta`` instead of the profile's beta when it is set."""
     from slicer.toolpath.surface import components
+
+    if layer.index == 0 and cfg.first_layer_beta > 0.0:
+        profile = replace(profile, beta=cfg.first_layer_beta)
 
     lift = LIFT_FACTOR * float(layer.height.max()) if len(layer.height) else 0.0
     normals = layer.direction / np.maximum(

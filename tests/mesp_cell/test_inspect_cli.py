@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import itertools
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -10,7 +11,9 @@ import pytest
 import trimesh
 
 from mesp_cell.cli import main
-from sim.baseline import PlanarConfig, planar_toolpath
+from sim import commercial
+from sim.baseline import VOLUME_MATCHING_BETA, PlanarConfig, planar_toolpath
+from sim.commercial import GCODE_FILE
 from sim.deposition import EllipseMorphology
 from slicer.report import read_report
 from slicer.stages import TetMesh
@@ -148,3 +151,43 @@ def test_flush_is_not_applied_twice(job: Path) -> None:
     assert main(["inspect", str(job), "--voxel", "0.5", "--flush", "--quiet",
                  "--no-figures"]) == 0
     assert "flush" not in read_report(job)["inspect"]
+
+
+needs_prusaslicer = pytest.mark.skipif(
+    shutil.which(commercial.DEFAULT_EXECUTABLE) is None,
+    reason="prusa-slicer is not installed (make baselines, or apt-get install prusa-slicer)")
+
+
+@needs_prusaslicer
+def test_inspect_cli_prusaslicer_baseline(job: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["inspect", str(job), "--voxel", "0.5", "--baseline", "prusaslicer",
+                 "--quiet", "--no-figures"]) == 0
+    section = read_report(job)["inspect"]
+    base = section["baseline"]
+    assert base["kind"] == "prusaslicer" and base["version"][0].isdigit()
+    assert base["settings"]["layer_height_mm"] == pytest.approx(0.6, rel=0.05)
+    assert base["settings"]["beta"] == pytest.approx(VOLUME_MATCHING_BETA)
+    assert base["volume_conservation_error"] == pytest.approx(0.0, abs=0.02)
+    assert 0.8 < base["infill_ratio"] <= 1.0
+    assert "surface_error_mean_mm" in section["comparison"]
+    assert (job / GCODE_FILE).is_file()
+    assert "prusaslicer" in capsys.readouterr().out
+
+
+def test_inspect_cli_without_prusaslicer_is_one_line(job: Path,
+                                                     monkeypatch: pytest.MonkeyPatch,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(commercial, "DEFAULT_EXECUTABLE", "prusa-slicer-not-installed-xyz")
+    assert main(["inspect", str(job), "--voxel", "0.5", "--baseline", "prusaslicer",
+                 "--quiet", "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert "not installed" in err and "make baselines" in err and "Traceback" not in err
+
+
+def test_inspect_cli_names_the_model_when_model_ply_is_gone(
+        job: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    (job / "model.ply").unlink()
+    (job / "report.json").write_text('{"job": {"model_file": "parts/box.stl"}}')
+    assert main(["inspect", str(job), "--baseline", "prusaslicer", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "no model.ply" in err and "mesp slice parts/box.stl" in err

@@ -108,6 +108,25 @@ def test_enclosed_cavity_is_a_pore() -> None:
     assert q.surface.stats()["max"] < grid.voxel  # a pore is not part of the outer surface
 
 
+def test_cavity_of_the_design_is_not_a_pore() -> None:
+    """A hollow box printed exactly: its sealed chamber is gel inside the printed body, but the
+    model has no material there, so the pore ratio stays 0 (a 4 mm^3 gel pocket in its wall
+    still counts)."""
+    grid = VoxelGrid(origin=(-2.0, -2.0, -2.0), voxel=0.25, shape=(48, 48, 48))
+    outer = _box((0.0, 0.0, 0.0), (8.0, 8.0, 8.0))
+    chamber = _box((2.0, 2.0, 2.0), (6.0, 6.0, 6.0))
+    chamber.invert()  # inward-facing: the model is the shell between the two boxes
+    shell = trimesh.util.concatenate([outer, chamber])
+    fill = model_fraction(shell, grid)
+    q = inspect_deposit(_deposit_of(fill, grid), shell.vertices, shell.faces)
+    assert q.pore_ratio == pytest.approx(0.0, abs=1e-6)
+    assert q.infill_ratio == pytest.approx(1.0, abs=1e-6)
+    pocket = model_fraction(_box((0.5, 3.0, 3.0), (1.5, 5.0, 5.0)), grid)
+    q = inspect_deposit(_deposit_of(np.clip(fill - pocket, 0, 1), grid), shell.vertices,
+                        shell.faces)
+    assert q.pore_ratio == pytest.approx(4.0 / (512.0 - 64.0), rel=0.1)
+
+
 def test_per_layer_attribution_adds_up() -> None:
     grid = VoxelGrid(origin=(-2.0, -2.0, -2.0), voxel=0.25, shape=(48, 48, 48))
     box = _box((0.0, 0.0, 0.0), (8.0, 8.0, 8.0))

@@ -62,3 +62,14 @@ def test_flush_is_reported_only_when_on(sliced: dict[bool, Path]) -> None:
     on = json.loads((sliced[True] / "report.json").read_text())["toolpath"]
     off = json.loads((sliced[False] / "report.json").read_text())["toolpath"]
     assert on["flush"]["moved"] > 0 and "flush" not in off
+
+
+def test_slab_volumes_are_reported_per_layer(sliced: dict[bool, Path]) -> None:
+    """Planar 1 mm layers of a 16 x 16 x 4 box: each layer's slab is 256 mm^3, the slabs add
+    up to the solid, and the integral of H over each layer agrees with its slab."""
+    report = json.loads((sliced[True] / "report.json").read_text())["toolpath"]
+    slab = report["slab_volume"]
+    assert slab["slab_sum_mm3"] == pytest.approx(16.0 * 16.0 * 4.0, rel=1e-6)
+    per_layer = [entry["slab_mm3"] for entry in report["per_layer"]]
+    assert np.allclose(per_layer, 256.0, rtol=1e-6)
+    assert slab["layer_rel_error_p90"] < 0.01

@@ -291,6 +291,20 @@ def test_stripe_layer_has_a_perimeter_loop(discs_perimeter: ToolpathResult) -> N
         assert abs(stat["deposited_mm3"] / stat["required_mm3"] - 1) < 0.02
 
 
+def test_narrow_band_stripes_get_no_perimeter_loop() -> None:
+    """stripe_perimeter only where the layer is wide: on an annulus 4.3 W across (W = 2.33
+    mm at H = 0.6 mm), two loops and clipped stubs would be mostly connectors, so the stripe
+    layer is the same with and without the option."""
+    v, f = disc_mesh(20.0, 0.6, inner=10.0)
+    layers = Layers(v, f, np.zeros(len(f), np.int32), np.full(len(v), 0.6),
+                    np.tile([0.0, 0.0, 1.0], (len(v), 1)))
+    runs = [compute_toolpath(layers, JobConfig().with_overrides(
+        toolpath={"first_pattern": "stripe", "stripe_perimeter": on}), PROFILE,
+        measure_baselines=False, workers=1).toolpath for on in (False, True)]
+    assert np.all(runs[0].pattern == PATTERN_STRIPE)
+    assert np.array_equal(runs[0].position, runs[1].position)
+
+
 def test_thin_band_gets_a_centre_line() -> None:
     """An annulus about one width wide (W = 4.5 mm at H = 1 mm) cannot take stripes (they
     vanish when cut back by W / 2) nor spaced contours: one loop along its middle."""
@@ -354,3 +368,24 @@ def test_join_factor_is_validated() -> None:
     with pytest.raises(ValueError):
         ToolpathConfig(join_factor=0.5)
     assert ToolpathConfig().join_factor >= 2.0
+
+
+def test_first_layer_beta_applies_to_layer_zero_only() -> None:
+    """first_layer_beta = pi/4: layer 0's filaments (w_f = 4 beta / pi W in volume mode) touch
+    side by side, printed faster with narrower lines; later layers keep the profile's beta."""
+    import dataclasses
+
+    beta0 = float(np.pi / 4)
+    config = JobConfig().with_overrides(toolpath={"first_layer_beta": beta0})
+    res = compute_toolpath(disc_stack(2), config, PROFILE, measure_baselines=False, workers=1)
+    tp = res.toolpath
+    first = dataclasses.replace(PROFILE, beta=beta0)
+    for layer, profile in ((0, first), (1, PROFILE)):
+        sel = tp.extrude & (tp.layer == layer)
+        assert np.allclose(tp.speed[sel], profile.speed_at(tp.height[sel]))
+        assert np.allclose(tp.width[sel], profile.width(tp.height[sel]))
+    w0 = np.median(tp.width[tp.extrude & (tp.layer == 0)])
+    assert w0 < 0.5 * np.median(tp.width[tp.extrude & (tp.layer == 1)])
+    assert abs(res.report["layer_volume_error"]) < 0.02
+    with pytest.raises(Exception, match="first_layer_beta"):
+        JobConfig().with_overrides(toolpath={"first_layer_beta": 0.2})
