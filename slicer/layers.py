@@ -1,21 +1,31 @@
 """Curved layers: iso-values of the slicing field and marching-tetrahedra extraction.
 
-* ``layer_spacing``: L = round((g_max - g_min) / delta) layers at g_min + (k + 0.5) * delta',
-  delta' = (g_max - g_min) / L, so the layers fill the part evenly and the physical mean
-  height stays at the target up to the factor delta' / delta (reported as ``mean_height_mm``).
+* ``layer_spacing``: slabs of the field about delta thick, each layer the iso-surface through
+  the middle of its slab, so the layers fill the part evenly and the physical mean height
+  stays at the target up to the factor delta' / delta (reported as ``mean_height_mm``).
+  Without critical regions inside the range: L = round((g_max - g_min) / delta) slabs of
+  delta' = (g_max - g_min) / L. The value of g on a critical region (paper eq. 7: constant
+  there) that lies inside the range, a cavity's floor or ceiling, or the top of one branch
+  of the part, is made a slab boundary: each interval between such values gets a whole
+  number of equal slabs. The surface is then the top (or bottom) of a whole layer; with one
+  global spacing it fell anywhere inside a slab and the layer there spread up to half a
+  layer of ink into the cavity (membrane example: 2,600 mm^3 on the cavity floor) while the
+  next slab's material had no layer.
 * ``extract_layers``: the stage entry point: spacing, extraction, the critical-region and
   layer-height checks, in one ``LayerExtraction``.
 * ``iso_surfaces``: marching tetrahedra, one layer at a time (no loop over tets inside a
   layer). A vertex sits on each crossed tet edge, shared by all tets around that edge (welded).
   Faces are oriented so their normal points along increasing g (the growth direction); quads
   are split into two triangles. Per vertex: direction = normalised area-weighted mean of the
-  gradients of the tets its faces cut, height H = delta' / |that mean gradient| (mm).
+  gradients of the tets its faces cut, height H = (slab thickness) / |that mean gradient|
+  (mm).
 * ``layer_gap``: the measured distance from layer k's vertices to the surface of layer k + 1,
   to check H against geometry.
 """
 
 from __future__ import annotations
 
+import itertools
 import time
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -35,26 +45,34 @@ class LayerSpacing(NamedTuple):
     """How the iso-values were chosen.
 
     Attributes:
-        iso: (L,) float64, iso-values in increasing order (field units).
+        iso: (L,) float64, iso-values in increasing order (field units), each the middle of
+            its slab.
         delta: float, requested spacing (gives the target mean height exactly).
-        delta_used: float, delta' = (g_max - g_min) / L actually used.
+        delta_used: float, delta' = (g_max - g_min) / L, the mean slab thickness.
         mean_height_mm: float, mm, resulting volume-weighted mean physical layer height
             (target * delta' / delta).
+        bounds: (L + 1,) float64, the slab boundaries (g_min ... g_max).
+        anchors: (k,) float64, critical values inside the range made slab boundaries.
     """
 
     iso: np.ndarray
     delta: float
     delta_used: float
     mean_height_mm: float
+    bounds: np.ndarray
+    anchors: np.ndarray
 
 
-def layer_spacing(g: np.ndarray, delta: float, layer_height_mm: float) -> LayerSpacing:
+def layer_spacing(g: np.ndarray, delta: float, layer_height_mm: float,
+                  anchors: np.ndarray | None = None) -> LayerSpacing:
     """Iso-values for a field whose spacing ``delta`` gives mean height ``layer_height_mm``.
 
     Args:
         g: (V,) float64, field values.
         delta: float > 0, field units per target layer height (``FieldResult.delta``).
         layer_height_mm: float, mm, the target mean layer height.
+        anchors: field values that must be slab boundaries (the critical regions' g); those
+            within delta / 2 of the range's ends or of a lower anchor are dropped.
 
     Returns:
         The spacing (at least one layer).
@@ -63,16 +81,50 @@ def layer_spacing(g: np.ndarray, delta: float, layer_height_mm: float) -> LayerS
     span = g_max - g_min
     if not np.isfinite(delta) or delta <= 0 or span <= 0:
         return LayerSpacing(np.array([g_min + 0.5 * span]), float(delta), span,
-                            float("nan"))
-    count = max(1, round(span / delta))
-    used = span / count
-    iso = g_min + (np.arange(count) + 0.5) * used
-    return LayerSpacing(iso, float(delta), used, layer_height_mm * used / delta)
+                            float("nan"), np.array([g_min, g_max]), np.zeros(0))
+    knots = [g_min]
+    for a in np.sort(np.asarray(anchors if anchors is not None else [], dtype=np.float64)):
+        if a - knots[-1] >= 0.5 * delta and g_max - a >= 0.5 * delta:
+            knots.append(float(a))
+    knots.append(g_max)
+    parts = [np.linspace(lo, hi, max(1, round((hi - lo) / delta)) + 1)[:-1]
+             for lo, hi in itertools.pairwise(knots)]
+    bounds = np.concatenate([*parts, [g_max]])
+    iso = 0.5 * (bounds[1:] + bounds[:-1])
+    used = span / len(iso)
+    return LayerSpacing(iso, float(delta), used, layer_height_mm * used / delta, bounds,
+                        np.asarray(knots[1:-1]))
+
+
+def slab_bounds(iso: np.ndarray, g_min: float, g_max: float) -> np.ndarray:
+    """(L + 1,) float64, the slab boundaries of iso-values that are slab middles.
+
+    Rebuilt from g_min (b_{k+1} = 2 iso_k - b_k); iso-values that are not the middles of
+    slabs tiling [g_min, g_max] (a hand-made ``Field``) get the midpoints between
+    neighbours instead, the end slabs as thick as their neighbouring gap (a single layer:
+    the whole range).
+    """
+    iso = np.asarray(iso, dtype=np.float64)
+    b = np.empty(len(iso) + 1)
+    b[0] = g_min
+    for k, c in enumerate(iso):  # one step per layer
+        b[k + 1] = 2.0 * c - b[k]
+    span = max(g_max - g_min, tol.zero)
+    if np.all(np.diff(b) > 0) and abs(b[-1] - g_max) <= 1e-6 * span:
+        b[-1] = g_max
+        return b
+    if len(iso) < 2:
+        return np.array([min(g_min, float(iso[0])), max(g_max, float(iso[0]))])
+    mid = 0.5 * (iso[1:] + iso[:-1])
+    return np.concatenate([[1.5 * iso[0] - 0.5 * iso[1]], mid, [1.5 * iso[-1] - 0.5 * iso[-2]]])
 
 
 def field_stage(result: FieldResult, layer_height_mm: float) -> tuple[Field, LayerSpacing]:
-    """The ``field.npz`` stage of a field result, with its spacing."""
-    spacing = layer_spacing(result.g, result.delta, layer_height_mm)
+    """The ``field.npz`` stage of a field result, with its spacing (critical regions' g as
+    slab boundaries)."""
+    anchors = np.array([float(result.g[r.vertices[0]]) for r in result.regions.regions
+                        if len(r.vertices)])
+    spacing = layer_spacing(result.g, result.delta, layer_height_mm, anchors)
     return Field(g=result.g, iso=spacing.iso), spacing
 
 
@@ -167,8 +219,8 @@ def iso_surfaces(mesh: TetOperators | TetMesh, field: Field,
 
     Returns:
         All layers in one ``Layers`` stage; layer k is the iso-surface ``g = iso[k]`` (all its
-        connected components). vertex_height is delta' / |grad g| with delta' the spacing of
-        the iso-values (mean spacing if they are not uniform).
+        connected components). vertex_height is t_k / |grad g| with t_k the thickness of
+        layer k's slab (``slab_bounds``).
     """
     ops = mesh if isinstance(mesh, TetOperators) else build_operators(mesh)
     if len(field.g) != ops.n_vertices:
@@ -185,7 +237,10 @@ def iso_surfaces(mesh: TetOperators | TetMesh, field: Field,
     edges = _unique_edges(tets, ops.n_vertices)
     grad = ops.gradient(g)
     span = float(g.max() - g.min()) if len(g) else 0.0
-    spacing = float(np.diff(iso).mean()) if len(iso) > 1 else span
+    if len(iso):
+        thickness = np.diff(slab_bounds(iso, float(g.min()), float(g.max())))
+    else:
+        thickness = np.zeros(0)
 
     out_v: list[np.ndarray] = []
     out_f: list[np.ndarray] = []
@@ -233,7 +288,7 @@ def iso_surfaces(mesh: TetOperators | TetMesh, field: Field,
         ]) / wsum[:, None]
         norm = np.linalg.norm(mean_grad, axis=1)
         direction = mean_grad / np.maximum(norm, tol.zero)[:, None]
-        height = spacing / np.maximum(norm, tol.zero)
+        height = float(thickness[k]) / np.maximum(norm, tol.zero)
         out_v.append(verts)
         out_f.append(faces + offset)
         out_l.append(np.full(len(faces), k, dtype=np.int32))
@@ -288,7 +343,8 @@ class LayerExtraction:
         spacing: how the iso-values were chosen (delta', resulting mean height).
         critical_report: one JSON-ready dict per critical region: selector, kind ("start" or
             "end"), faces, vertices, area_mm2, g, slot (the region lies between iso[slot - 1]
-            and iso[slot]), on_one_layer (all its vertices in that same slot).
+            and iso[slot]), on_one_layer (all its vertices in that same slot),
+            on_slab_boundary (g is a slab boundary: the region is a whole layer's face).
         height_check: JSON-ready dict comparing each vertex's reported height with the
             measured distance to the next layer: pairs, vertices, median_rel_error,
             p90_rel_error.
@@ -327,19 +383,25 @@ def check_heights(layers: Layers, pairs: int = GAP_CHECK_PAIRS) -> dict[str, flo
             "p90_rel_error": float(np.percentile(err, 90))}
 
 
-def _critical_report(result: FieldResult, iso: np.ndarray) -> list[dict[str, object]]:
+def _critical_report(result: FieldResult, spacing: LayerSpacing) -> list[dict[str, object]]:
     out: list[dict[str, object]] = []
+    iso, bounds = spacing.iso, spacing.bounds
+    span = max(float(bounds[-1] - bounds[0]), tol.zero) if len(bounds) else 1.0
     for region in result.regions.regions:  # a handful of regions
         slots = np.unique(np.searchsorted(iso, result.g[region.vertices]))
+        g_region = float(result.g[region.vertices[0]])
         out.append({
             "selector": region.selector,
             "kind": "end" if region.sign > 0 else "start",
             "faces": len(region.faces),
             "vertices": len(region.vertices),
             "area_mm2": region.area,
-            "g": float(result.g[region.vertices[0]]),
+            "g": g_region,
             "slot": int(slots[0]),
             "on_one_layer": len(slots) == 1,
+            # the region is the top (end) or bottom (start) face of a whole layer's slab
+            "on_slab_boundary": bool(len(bounds) and
+                                     np.min(np.abs(bounds - g_region)) <= 1e-9 * span),
         })
     return out
 
@@ -373,12 +435,16 @@ def extract_layers(
                              else mesh.n_vertices):
             raise InputError("the field result belongs to another tet mesh",
                              "re-run the slicing stage on this tet mesh")
-        regions = _critical_report(source, field.iso)
+        regions = _critical_report(source, spacing)
     else:
         field = source
         ops = mesh if isinstance(mesh, TetOperators) else build_operators(mesh)
         used = float(np.diff(field.iso).mean()) if len(field.iso) > 1 else float("nan")
-        spacing = LayerSpacing(np.asarray(field.iso), float("nan"), used, float("nan"))
+        g = np.asarray(field.g, dtype=np.float64)
+        bounds = (slab_bounds(field.iso, float(g.min()), float(g.max())) if len(field.iso)
+                  else np.zeros(0))
+        spacing = LayerSpacing(np.asarray(field.iso), float("nan"), used, float("nan"),
+                               bounds, np.zeros(0))
         regions = []
     layers = iso_surfaces(ops, field, progress=prog)
     check = check_heights(layers)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 import tomli_w
@@ -22,6 +22,9 @@ from slicer.mesh_io import Surface
 from slicer.progress import Progress, StageTimer
 from slicer.report import update_report
 from slicer.stages import Field, Layers, TetMesh
+
+if TYPE_CHECKING:
+    from slicer.layers import LayerSpacing
 
 Until = Literal["tetmesh", "layers", "toolpath"]
 
@@ -167,6 +170,10 @@ def _slice(
         "o_align": [float(x) for x in result.trace.o_align],
         "height_std_per_iteration_mm": [float(x) for x in result.trace.height_std],
         "layer_height_check": extraction.height_check,
+        # critical values inside the range made slab boundaries, and the slab thickness
+        # relative to the target spacing that this leaves (1 everywhere without them)
+        "slab_anchors": [float(a) for a in extraction.spacing.anchors],
+        "slab_thickness_ratio": _thickness_ratio(extraction.spacing),
         "timing_s": dict(result.timings),
     }
     return report, extraction.layers
@@ -202,20 +209,28 @@ def _toolpath(
     return report
 
 
+def _thickness_ratio(spacing: LayerSpacing) -> list[float]:
+    """[min, max] slab thickness / requested spacing delta."""
+    thickness = np.diff(spacing.bounds)
+    if not len(thickness) or not np.isfinite(spacing.delta) or spacing.delta <= 0:
+        return []
+    return [float(thickness.min() / spacing.delta), float(thickness.max() / spacing.delta)]
+
+
 def _slab_check(tetmesh: TetMesh, field: Field, report: dict[str, Any]) -> dict[str, Any]:
     """Each layer's required volume (the integral of H over it, what the toolpath deposits)
-    against the exact volume of its slab of the solid (between the midpoints of its
-    iso-value and its neighbours'). They differ where the cross-section changes fast within
-    a layer (a part ending or starting mid-slab): there the ink of the layer lands next to
-    the solid, and the whole-model volume error carries the sum of those differences.
+    against the exact volume of its slab of the solid (``slab_bounds``). They differ where
+    the cross-section changes fast within a slab (a part ending or starting mid-slab): there
+    the ink of the layer lands next to the solid, and the whole-model volume error carries
+    the sum of those differences.
     Adds ``slab_mm3`` to each per-layer entry."""
+    from slicer.layers import slab_bounds
     from slicer.toolpath.volume import slab_volumes
 
     iso = np.asarray(field.iso, dtype=np.float64)
     if len(iso) == 0:
         return {}
-    bounds = np.concatenate([[min(float(field.g.min()), iso[0])], 0.5 * (iso[1:] + iso[:-1]),
-                             [max(float(field.g.max()), iso[-1])]])
+    bounds = slab_bounds(iso, float(field.g.min()), float(field.g.max()))
     slab = slab_volumes(tetmesh.vertices, tetmesh.tets, field.g, bounds)
     layers = report.get("per_layer", [])
     required = np.zeros(len(iso))

@@ -29,7 +29,9 @@ on components wider than PERIMETER_MIN_DISTANCE spacings from the boundary); the
 of the volume match. Thin components: a band with holes
 whose largest boundary distance is below THIN_BAND * W holds one line, printed along its
 middle (iso-line 1/2 of a harmonic function that is 0 on the outer and 1 on the inner
-boundary loops); when the volume of the regular pattern stays off by more than
+boundary loops), its width scaled to the band's volume by the speed (within
+CENTRE_WIDTH_SCALE and the profile's table: a thin wall gets a thinner, faster line instead of
+a 1.5x overfill); when the volume of the regular pattern stays off by more than
 THIN_SHORTFALL, the other pattern and that centre line are tried and the closest volume wins
 (reported as 'thin_fallback'). A component that cannot be
 processed (no boundary, a solver failure) is skipped with its reason in the report instead
@@ -99,6 +101,7 @@ SHORT_JOIN = 2.0  # join limit (x W) retried where the configured one misses the
 SHORT_JOIN_ABOVE = 0.01  # ... by more than this (relative)
 THIN_BAND_FIT = 1.5  # fit_bands: widest band below this x W -> the one centre line
 PITCH_SMOOTHING = 2.0  # contour pitch blended over this x W where the line count changes
+CENTRE_WIDTH_SCALE = (0.5, 1.5)  # a centre line's width may be scaled to its band this far
 
 
 def layer_pattern(index: int, first: str) -> int:
@@ -598,8 +601,23 @@ def _component_toolpath_unsafe(
         return match_volume(evaluate, required, cfg.volume_tolerance)
 
     def centre_match(lines: SurfaceLines) -> VolumeMatch[_Built]:
+        """One line along a band too narrow (or too wide) for W: its width is scaled to the
+        band by the nozzle speed (W = C / (H v) stays true; the filament gets thinner or
+        fatter with it), within CENTRE_WIDTH_SCALE and the profile's speed table."""
         def fixed_lines(t: float) -> tuple[float, _Built]:
             built = comp.build(lines, None, comp.w_mean, start, lifter, lift)
+            volume = float(built.waypoints.deposited().sum())
+            if volume <= 0 or required <= 0:
+                return volume, built
+            wp = built.waypoints
+            lo, hi = CENTRE_WIDTH_SCALE
+            v_lo, v_hi = (float(x) for x in profile.speed_for_height(
+                np.array(profile.height_range[::-1])))
+            # never beyond the table's speeds, unless the line already was
+            speed = np.clip(wp.speed / np.clip(required / volume, lo, hi),
+                            np.minimum(v_lo, wp.speed), np.maximum(v_hi, wp.speed))
+            width = wp.width * wp.speed / speed
+            built = replace(built, waypoints=replace(wp, speed=speed, width=width))
             return float(built.waypoints.deposited().sum()), built
 
         return match_volume(fixed_lines, required, cfg.volume_tolerance, 1.0, 1)

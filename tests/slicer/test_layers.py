@@ -8,7 +8,14 @@ from scipy.sparse.csgraph import connected_components
 from slicer.config import SlicingConfig
 from slicer.errors import InputError
 from slicer.field import compute_field
-from slicer.layers import extract_layers, field_stage, iso_surfaces, layer_gap, layer_spacing
+from slicer.layers import (
+    extract_layers,
+    field_stage,
+    iso_surfaces,
+    layer_gap,
+    layer_spacing,
+    slab_bounds,
+)
 from slicer.operators import build_operators
 from slicer.stages import Field, Layers, TetMesh
 from tests.slicer.conftest import box_mesh, ring_mesh
@@ -35,6 +42,24 @@ def test_spacing_rounds_to_whole_layers() -> None:
     assert s.mean_height_mm == pytest.approx(0.6 * (10 / 33) / 0.3)
 
 
+def test_critical_values_become_slab_boundaries() -> None:
+    """A cavity floor at g = 4.4 and a ceiling at 7.0 on a 0..10 field with delta 1: whole
+    slabs in [0, 4.4], [4.4, 7], [7, 10]; anchors at the ends or closer than delta / 2 to
+    another are dropped."""
+    g = np.array([0.0, 10.0])
+    s = layer_spacing(g, delta=1.0, layer_height_mm=1.0, anchors=np.array([0.0, 4.4, 4.6, 7.0,
+                                                                           9.8]))
+    np.testing.assert_allclose(s.anchors, [4.4, 7.0])
+    for a in (4.4, 7.0):
+        assert np.min(np.abs(s.bounds - a)) < 1e-12
+    np.testing.assert_allclose(s.iso, 0.5 * (s.bounds[1:] + s.bounds[:-1]))
+    thickness = np.diff(s.bounds)
+    np.testing.assert_allclose(thickness, [1.1] * 4 + [2.6 / 3] * 3 + [1.0] * 3)
+    assert s.delta_used == pytest.approx(1.0)
+    # the middles rebuild their slabs exactly
+    np.testing.assert_allclose(slab_bounds(s.iso, 0.0, 10.0), s.bounds, atol=1e-12)
+
+
 def test_linear_field_closed_form(box: TetMesh) -> None:
     ops = build_operators(box)
     a = np.array([0.2, 0.3, 1.0])
@@ -59,8 +84,10 @@ def test_linear_field_closed_form(box: TetMesh) -> None:
         z = (c - a[0] * xx - a[1] * yy) / a[2]
         inside = ((z >= 0) & (z <= 8)).mean() * 64.0
         assert area == pytest.approx(inside * np.linalg.norm(a) / a[2], rel=1e-2)
-    # Heights: spacing of the iso-values over |grad g|.
-    np.testing.assert_allclose(layers.vertex_height, np.diff(iso).mean() / np.linalg.norm(a))
+    # Heights: the local spacing of these hand-made iso-values (not slab middles: the gaps
+    # to the neighbours' midpoints, 2.5, 2.625, 2.75) over |grad g|.
+    for k, t in enumerate((2.5, 2.625, 2.75)):
+        np.testing.assert_allclose(layers.layer(k).height, t / np.linalg.norm(a))
     # Faces point along increasing g.
     assert np.all(_face_normals(layers) @ a > 0)
 
@@ -159,6 +186,7 @@ def test_stage_entry_point_reports_checks(ring: TetMesh) -> None:
     np.testing.assert_array_equal(out.field.g, res.g)
     assert [r["kind"] for r in out.critical_report] == ["start", "end"]
     assert all(r["on_one_layer"] for r in out.critical_report)
+    assert all(r["on_slab_boundary"] for r in out.critical_report)
     assert out.critical_report[0]["slot"] == 0
     assert out.critical_report[1]["slot"] == len(out.field.iso)
     assert out.height_check["pairs"] >= 5
