@@ -132,7 +132,7 @@ class ToolpathConfig:
     join_factor: float = 3.0
     fit_bands: bool = True
     flush: bool = True
-    stripe_perimeter: bool = True
+    stripe_perimeter: bool = False
     first_layer_beta: float = 0.0
 
     def __post_init__(self) -> None:
