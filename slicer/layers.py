@@ -63,13 +63,8 @@ class LayerSpacing(NamedTuple):
     anchors: np.ndarray
 
 
-MAX_HEIGHT_QUANTILE = 2.0  # percentile of |grad g| taken as an interval's thickest point
-
-
 def layer_spacing(g: np.ndarray, delta: float, layer_height_mm: float,
-                  anchors: np.ndarray | None = None,
-                  thickness: tuple[np.ndarray, np.ndarray, float] | None = None
-                  ) -> LayerSpacing:
+                  anchors: np.ndarray | None = None) -> LayerSpacing:
     """Iso-values for a field whose spacing ``delta`` gives mean height ``layer_height_mm``.
 
     Args:
@@ -78,13 +73,6 @@ def layer_spacing(g: np.ndarray, delta: float, layer_height_mm: float,
         layer_height_mm: float, mm, the target mean layer height.
         anchors: field values that must be slab boundaries (the critical regions' g); those
             within delta / 2 of the range's ends or of a lower anchor are dropped.
-        thickness: optional (tet g (T,) float64, tet |grad g| (T,) float64 field units per
-            mm, max_height_mm): an interval between anchors whose thickest point
-            (MAX_HEIGHT_QUANTILE percentile of |grad g| over its tets) would make a slab
-            thicker than max_height_mm gets more slabs. Between two critical surfaces of a
-            part whose thickness varies (the membrane's dome: 2 to 9 mm), round(len /
-            delta) slabs keep the mean height but put layers thicker than the extrusion
-            profile can print where the part is thickest.
 
     Returns:
         The spacing (at least one layer).
@@ -99,18 +87,7 @@ def layer_spacing(g: np.ndarray, delta: float, layer_height_mm: float,
         if a - knots[-1] >= 0.5 * delta and g_max - a >= 0.5 * delta:
             knots.append(float(a))
     knots.append(g_max)
-    def count(lo: float, hi: float) -> int:
-        n = max(1, round((hi - lo) / delta))
-        if thickness is not None:
-            tet_g, tet_grad, max_h = thickness
-            sel = (tet_g >= lo) & (tet_g < hi)
-            if np.any(sel) and max_h > 0:
-                slope = float(np.percentile(tet_grad[sel], MAX_HEIGHT_QUANTILE))
-                if slope > 0:
-                    n = max(n, int(np.ceil((hi - lo) / (max_h * slope) - 1e-9)))
-        return n
-
-    parts = [np.linspace(lo, hi, count(lo, hi) + 1)[:-1]
+    parts = [np.linspace(lo, hi, max(1, round((hi - lo) / delta)) + 1)[:-1]
              for lo, hi in itertools.pairwise(knots)]
     bounds = np.concatenate([*parts, [g_max]])
     iso = 0.5 * (bounds[1:] + bounds[:-1])
@@ -142,20 +119,12 @@ def slab_bounds(iso: np.ndarray, g_min: float, g_max: float) -> np.ndarray:
     return np.concatenate([[1.5 * iso[0] - 0.5 * iso[1]], mid, [1.5 * iso[-1] - 0.5 * iso[-2]]])
 
 
-def field_stage(result: FieldResult, layer_height_mm: float,
-                max_height_mm: float | None = None) -> tuple[Field, LayerSpacing]:
+def field_stage(result: FieldResult, layer_height_mm: float) -> tuple[Field, LayerSpacing]:
     """The ``field.npz`` stage of a field result, with its spacing (critical regions' g as
-    slab boundaries; with ``max_height_mm``, no interval's slabs thicker than that where
-    more slabs avoid it)."""
+    slab boundaries)."""
     anchors = np.array([float(result.g[r.vertices[0]]) for r in result.regions.regions
                         if len(r.vertices)])
-    thickness = None
-    if max_height_mm is not None:
-        ops = result.operators
-        tet_g = result.g[ops.tets].mean(axis=1)
-        tet_grad = np.linalg.norm(ops.gradient(result.g), axis=1)
-        thickness = (tet_g, tet_grad, float(max_height_mm))
-    spacing = layer_spacing(result.g, result.delta, layer_height_mm, anchors, thickness)
+    spacing = layer_spacing(result.g, result.delta, layer_height_mm, anchors)
     return Field(g=result.g, iso=spacing.iso), spacing
 
 
@@ -442,7 +411,6 @@ def extract_layers(
     source: FieldResult | Field,
     config: SlicingConfig | None = None,
     progress: Progress | None = None,
-    max_height_mm: float | None = None,
 ) -> LayerExtraction:
     """The layers of a slicing field: iso-values, marching tets, and the checks.
 
@@ -452,7 +420,6 @@ def extract_layers(
             existing ``Field`` stage (its iso-values are used as they are).
         config: slicing settings; its ``layer_height_mm`` overrides the result's target.
         progress: receives the stage start/end and per-layer progress.
-        max_height_mm: the thickest layer the extrusion profile prints (``field_stage``).
 
     Returns:
         The extraction (field and layers stages, spacing, critical-region and height checks).
@@ -462,7 +429,7 @@ def extract_layers(
     prog.start("layers")
     if isinstance(source, FieldResult):
         target = config.layer_height_mm if config is not None else source.layer_height_mm
-        field, spacing = field_stage(source, target, max_height_mm)
+        field, spacing = field_stage(source, target)
         ops = source.operators
         if len(source.g) != (len(mesh.vertices) if isinstance(mesh, TetMesh)
                              else mesh.n_vertices):

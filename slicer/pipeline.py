@@ -128,13 +128,10 @@ def _slice(
     from slicer import field as field_mod
     from slicer import figures
     from slicer import layers as layers_mod
-    from slicer.extrusion import load_profile
     from slicer.layer_export import export_layers_ply
 
     result = field_mod.compute_field(tetmesh, job.slicing, progress=progress)
-    max_height = load_profile(job.extrusion.profile).layer_height_range[1]
-    extraction = layers_mod.extract_layers(tetmesh, result, job.slicing, progress=progress,
-                                           max_height_mm=max_height)
+    extraction = layers_mod.extract_layers(tetmesh, result, job.slicing, progress=progress)
     extraction.field.save(out_dir)
     extraction.layers.save(out_dir)
     export_layers_ply(extraction.layers, out_dir / "layers_ply")

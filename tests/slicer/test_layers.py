@@ -60,21 +60,6 @@ def test_critical_values_become_slab_boundaries() -> None:
     np.testing.assert_allclose(slab_bounds(s.iso, 0.0, 10.0), s.bounds, atol=1e-12)
 
 
-def test_slab_count_keeps_layers_within_the_profile() -> None:
-    """An interval [4, 10] of g whose thickest part has |grad g| = 0.5 (2 mm per field unit):
-    round(6 / 1) = 6 slabs would be 2 mm thick there; with a 1.5 mm limit it gets
-    ceil(6 / 0.75) = 8. The interval below, |grad g| = 1, keeps round(4 / 1) = 4."""
-    g = np.array([0.0, 10.0])
-    tet_g = np.array([1.0, 3.0, 5.0, 7.0, 9.0, 9.5])
-    tet_grad = np.array([1.0, 1.0, 1.0, 0.5, 1.0, 1.0])
-    s = layer_spacing(g, delta=1.0, layer_height_mm=1.0, anchors=np.array([4.0]),
-                      thickness=(tet_g, tet_grad, 1.5))
-    thickness = np.diff(s.bounds)
-    np.testing.assert_allclose(thickness, [1.0] * 4 + [0.75] * 8)
-    plain = layer_spacing(g, delta=1.0, layer_height_mm=1.0, anchors=np.array([4.0]))
-    assert len(plain.iso) == 10
-
-
 def test_linear_field_closed_form(box: TetMesh) -> None:
     ops = build_operators(box)
     a = np.array([0.2, 0.3, 1.0])
