@@ -78,13 +78,13 @@ def slice_model(
         return _finish(out_dir, report, timer, t0)
 
     with timer.stage("slicing"):
-        slicing_report, layers = _slice(tetmesh, job, out_dir, progress)
+        slicing_report, field, layers = _slice(tetmesh, job, out_dir, progress)
     report["slicing"] = slicing_report
     if until == "layers":
         return _finish(out_dir, report, timer, t0)
 
     with timer.stage("toolpath"):
-        report["toolpath"] = _toolpath(tetmesh, layers, job, out_dir, surface.volume_mm3,
+        report["toolpath"] = _toolpath(tetmesh, field, layers, job, out_dir, surface.volume_mm3,
                                        progress)
     return _finish(out_dir, report, timer, t0)
 
@@ -123,7 +123,7 @@ def _prepare_out_dir(out_dir: Path) -> None:
 
 def _slice(
     tetmesh: TetMesh, job: JobConfig, out_dir: Path, progress: Progress | None
-) -> tuple[dict[str, Any], Layers]:
+) -> tuple[dict[str, Any], Field, Layers]:
     """Field optimisation and layer extraction, their files, pictures and report section."""
     from slicer import field as field_mod
     from slicer import figures
@@ -176,12 +176,12 @@ def _slice(
         "slab_thickness_ratio": _thickness_ratio(extraction.spacing),
         "timing_s": dict(result.timings),
     }
-    return report, extraction.layers
+    return report, extraction.field, extraction.layers
 
 
 def _toolpath(
-    tetmesh: TetMesh, layers: Layers, job: JobConfig, out_dir: Path, model_volume: float,
-    progress: Progress | None,
+    tetmesh: TetMesh, field: Field, layers: Layers, job: JobConfig, out_dir: Path,
+    model_volume: float, progress: Progress | None,
 ) -> dict[str, Any]:
     """Toolpath generation, its files, pictures and report section."""
     from slicer.extrusion import load_profile
@@ -205,7 +205,7 @@ def _toolpath(
     write_toolpath_figures(result, layers, out_dir / "figures")
     deposited = float(report["deposited_volume_mm3"])
     report["volume_error"] = deposited / model_volume - 1.0 if model_volume > 0 else float("nan")
-    report["slab_volume"] = _slab_check(tetmesh, Field.load(out_dir), report)
+    report["slab_volume"] = _slab_check(tetmesh, field, report)
     return report
 
 
