@@ -80,6 +80,7 @@ from slicer.toolpath.mapback import (
 from slicer.toolpath.ordering import line_levels, order_lines
 from slicer.toolpath.resample import (
     drop_short_lines,
+    drop_tiny_loops,
     face_neighbours,
     line_index,
     line_lengths,
@@ -102,6 +103,7 @@ SHORT_JOIN_ABOVE = 0.01  # ... by more than this (relative)
 THIN_BAND_FIT = 1.5  # fit_bands: widest band below this x W -> the one centre line
 PITCH_SMOOTHING = 2.0  # contour pitch blended over this x W where the line count changes
 CENTRE_WIDTH_SCALE = (0.5, 1.5)  # a centre line's width may be scaled to its band this far
+TINY_LOOP = 2.0  # closed lines shorter than this x W are dropped (a blob, not a loop)
 
 
 def layer_pattern(index: int, first: str) -> int:
@@ -475,6 +477,10 @@ class _Component:
         lines = map_back(lines_found, self.vertices, self.faces)
         lines = drop_short_lines(lines, self.cfg.min_path_length_mm)
         _, _, w_pt = self.values_at(lines.face, lines.bary)
+        kept = drop_tiny_loops(lines, w_pt, TINY_LOOP)
+        if kept is not lines:
+            lines = kept
+            _, _, w_pt = self.values_at(lines.face, lines.bary)
         trim = None
         if trim_distance is not None and lines.n_lines:
             # An open line ending on the boundary stops half a width inside it: its band of

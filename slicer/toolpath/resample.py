@@ -238,3 +238,21 @@ def drop_short_lines(lines: SurfaceLines, min_length: float) -> SurfaceLines:
     idx = line_index(lines)
     keep = (line_lengths(lines) >= min_length) & (idx.stop - idx.start >= 2)
     return select_lines(lines, keep)
+
+
+def drop_tiny_loops(lines: SurfaceLines, width: NDArray[np.float64], factor: float
+                    ) -> SurfaceLines:
+    """Lines without the closed loops shorter than ``factor`` x their mean width.
+
+    width: (P,) float64, mm, the toolpath width at each point. A loop that short (around a
+    local maximum of the boundary distance) encloses less than a filament's width: printed,
+    it is one blob, not a loop.
+    """
+    if not lines.closed.any():
+        return lines
+    n = lines.n_lines
+    w_line = (np.bincount(lines.line, weights=width, minlength=n)[:n]
+              / np.maximum(np.bincount(lines.line, minlength=n)[:n], 1))
+    tiny = lines.closed & (line_lengths(lines) < factor * w_line)
+    return select_lines(lines, ~tiny) if tiny.any() else lines
+

@@ -7,7 +7,12 @@ import pytest
 
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.mapback import interpolate
-from slicer.toolpath.resample import drop_short_lines, line_lengths, resample_lines
+from slicer.toolpath.resample import (
+    drop_short_lines,
+    drop_tiny_loops,
+    line_lengths,
+    resample_lines,
+)
 
 from .test_build import disc_mesh
 
@@ -75,6 +80,24 @@ def test_drop_short_lines() -> None:
     assert out.n_lines == int(np.sum(lengths >= cut))
     assert np.all(line_lengths(out) >= cut)
     assert np.array_equal(np.unique(out.line), np.arange(out.n_lines))
+
+
+def test_drop_tiny_loops_keeps_open_lines_and_long_loops() -> None:
+    """Contour loops of a dome at 1, 3, 5, ... mm from the rim: with W = 2 mm and factor 2,
+    exactly the closed loops shorter than 4 mm go; the rest are kept unchanged."""
+    _, _, lines = _dome_contours()
+    width = np.full(len(lines.points), 2.0)
+    lengths = line_lengths(lines)
+    limit = 4.0
+    # a loop as short as that is what a local maximum of the distance leaves
+    small = lines._replace(points=lines.points * np.where(lines.line == lines.line.max(),
+                                                          0.02, 1.0)[:, None])
+    small_len = line_lengths(small)
+    assert small_len.min() < limit < lengths.min()
+    out = drop_tiny_loops(small, width, limit / 2.0)
+    assert out.n_lines == int(np.sum(~(small.closed & (small_len < limit))))
+    assert np.all(line_lengths(out) >= limit)
+    assert drop_tiny_loops(lines, width, 2.0) is lines
 
 
 def test_trim_open_line_ends() -> None:
