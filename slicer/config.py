@@ -134,8 +134,11 @@ class ToolpathConfig:
     flush: bool = True
     stripe_perimeter: bool = False
     first_layer_beta: float = 0.0
+    boundary_distance: Literal["eikonal", "heat"] = "eikonal"
 
     def __post_init__(self) -> None:
+        if self.boundary_distance not in ("eikonal", "heat"):
+            raise ValueError("boundary_distance must be 'eikonal' or 'heat'")
         if not 1.0 <= self.join_factor <= 20.0:
             raise ValueError("join_factor must be in [1, 20] (connector length / W)")
         if not 0.02 <= self.waypoint_spacing <= 2.0:

@@ -50,7 +50,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -280,12 +280,15 @@ class _Surface:
     """What the line generators need of one (possibly deformed) component surface."""
 
     def __init__(self, vertices: NDArray[np.float64], faces: NDArray[np.int32],
-                 fit_bands: bool = True, perimeter: bool = False) -> None:
+                 fit_bands: bool = True, perimeter: bool = False,
+                 distance: Literal["eikonal", "heat"] = "eikonal") -> None:
         from slicer.toolpath.geodesic import boundary_distance
 
         self.vertices = vertices
         self.faces = faces
-        self.distance = boundary_distance(vertices, faces)
+        self.backend: Literal["eikonal", "heat"] = distance
+        # contours, stripe directions, trims, perimeters (geodesic.py, eikonal.py)
+        self.distance = boundary_distance(vertices, faces, backend=distance)
         self.max_distance = float(self.distance.max()) if len(self.distance) else 0.0
         self._direction: NDArray[np.float64] | None = None
         self.fit_bands = fit_bands
@@ -307,8 +310,9 @@ class _Surface:
                                            axis=1).sum()) for lp in loops]
             outer = int(np.argmax(length))
             inner = np.concatenate([lp for i, lp in enumerate(loops) if i != outer])
-            self._sides = (distance_from(self.vertices, self.faces, loops[outer]),
-                           distance_from(self.vertices, self.faces, inner))
+            self._sides = (distance_from(self.vertices, self.faces, loops[outer],
+                                         backend=self.backend),
+                           distance_from(self.vertices, self.faces, inner, backend=self.backend))
         return self._sides
 
     def contour_level(self) -> NDArray[np.float64]:
@@ -583,7 +587,7 @@ def _component_toolpath_unsafe(
 
     t0 = time.perf_counter()
     perimeter = cfg.stripe_perimeter and pattern == PATTERN_STRIPE
-    surf = _Surface(deformed, comp.faces, cfg.fit_bands, perimeter)
+    surf = _Surface(deformed, comp.faces, cfg.fit_bands, perimeter, cfg.boundary_distance)
     timings["distance"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -671,7 +675,8 @@ def _component_toolpath_unsafe(
         if deformed is comp.vertices or fallback == "centre-line":
             b = built  # no deformation (or one line): the direct lines are the lines
         else:
-            b = run(_Surface(comp.vertices, comp.faces, cfg.fit_bands, perimeter), used,
+            b = run(_Surface(comp.vertices, comp.faces, cfg.fit_bands, perimeter,
+                             cfg.boundary_distance), used,
                     match.tau).result
         err_undeformed = _measure(b.lines, comp.values_at(b.lines.face, b.lines.bary)[2],
                                   comp.normals[b.lines.face])

@@ -12,6 +12,15 @@ Backend ``potpourri3d``: potpourri3d's ``MeshHeatMethodDistanceSolver`` with ``u
 triangles marching tetrahedra produce; libigl's ``heat_geodesics`` is the alternative backend
 (extrinsic cotangent Laplacian). ``fmm`` is geometry-central's fast marching from the boundary
 polylines, offered for comparison (not the paper's method).
+
+Backend ``eikonal`` (``slicer.toolpath.eikonal``): the fixed point of the discrete eikonal
+equation with the boundary edges as sources, exact wherever the front is straight within a
+triangle. The toolpaths use it by default (``[toolpath] boundary_distance``): the heat
+method's smoothing over one edge length shifts the distance by 0.1-0.4 mm near the boundary on
+the coarse meshes marching tetrahedra cut, which moves every contour by that much (contour
+width error p90 on the cube 26% -> 12%, hemisphere 11% -> 5%, socket 10.4% -> 8.3%). The stripe
+direction field taken from it is as good as from the heat distance (stripe p90 within 1.5
+points on every example).
 """
 
 from __future__ import annotations
@@ -34,7 +43,7 @@ from slicer.toolpath.surface import (
     spd_solver,
 )
 
-Backend = Literal["heat", "potpourri3d", "igl", "fmm"]
+Backend = Literal["heat", "eikonal", "potpourri3d", "igl", "fmm"]
 
 
 def _mean_edge(vertices: NDArray[np.float64], faces: NDArray[np.integer]) -> float:
@@ -82,7 +91,8 @@ def boundary_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
                       ) -> NDArray[np.float64]:
     """(n,) float64 mm, heat-method geodesic distance from all boundary vertices (all loops).
 
-    backend: "heat" (default, Dirichlet heat method above), "potpourri3d", "igl" or "fmm".
+    backend: "heat" (default, Dirichlet heat method above), "eikonal", "potpourri3d", "igl" or
+        "fmm".
     robust: use the intrinsic Delaunay Laplacian (heat, potpourri3d), for sliver triangles.
     Vertices not referenced by any face get distance 0. Raises InputError for a closed
     surface (no boundary to measure from).
@@ -100,6 +110,10 @@ def boundary_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
                          "pass an open surface (layers of a solid always have a boundary)")
     if backend == "heat":
         d_local = _heat_dirichlet(v_local, f_local, src, robust)
+    elif backend == "eikonal":
+        from slicer.toolpath.eikonal import eikonal_distance
+
+        d_local = eikonal_distance(v_local, f_local, src).distance
     elif backend == "potpourri3d":
         import potpourri3d as pp3d
 
@@ -127,8 +141,8 @@ def boundary_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
                              dtype=np.float64).ravel()
     else:
         raise InputError(f"unknown geodesic backend {backend!r}",
-                         "use 'heat', 'potpourri3d', 'igl' or 'fmm'")
-    if backend != "heat":
+                         "use 'heat', 'eikonal', 'potpourri3d', 'igl' or 'fmm'")
+    if backend not in ("heat", "eikonal"):
         # point-source solvers fix the constant of a Neumann solve: pin the boundary to 0
         d_local = np.maximum(d_local - d_local[src].mean(), 0.0)
     d_local[src] = 0.0
@@ -138,12 +152,14 @@ def boundary_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
 
 
 def distance_from(vertices: NDArray[np.float64], faces: NDArray[np.integer],
-                  sources: NDArray[np.integer], robust: bool = True) -> NDArray[np.float64]:
-    """(n,) float64 mm, heat-method geodesic distance from the vertex set ``sources``.
+                  sources: NDArray[np.integer], robust: bool = True,
+                  backend: Literal["heat", "eikonal"] = "heat") -> NDArray[np.float64]:
+    """(n,) float64 mm, geodesic distance from the vertex set ``sources``.
 
     Same Dirichlet heat method as ``boundary_distance`` (d = 0 on the sources), with the
-    natural (no-flux) condition on the rest of the boundary: the distance within the
-    layer from, e.g., one boundary loop. Vertices not referenced by any face get 0.
+    natural (no-flux) condition on the rest of the boundary, or the eikonal solver: the
+    distance within the layer from, e.g., one boundary loop. Vertices not referenced by any
+    face get 0.
     """
     check_mesh(vertices, faces)
     v = np.ascontiguousarray(vertices, dtype=np.float64)
@@ -159,7 +175,12 @@ def distance_from(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     if len(src) == 0:
         raise InputError("no source vertex lies on the layer component",
                          "pass vertex ids of the component (e.g. one boundary loop)")
-    d_local = _heat_dirichlet(v[used], f_local, src, robust)
+    if backend == "eikonal":
+        from slicer.toolpath.eikonal import eikonal_distance
+
+        d_local = eikonal_distance(v[used], f_local, src).distance
+    else:
+        d_local = _heat_dirichlet(v[used], f_local, src, robust)
     d_local[src] = 0.0
     out = np.zeros(len(v))
     out[used] = d_local

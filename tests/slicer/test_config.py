@@ -34,6 +34,7 @@ def test_job_file_overrides_defaults(tmp_path: Path) -> None:
         ("[model]\nunits = 'furlong'\n", "'job.model.units' is 'furlong'"),
         ("[slicing\n", "not valid TOML"),
         ("[slicing]\ncritical = ['sideways']\n", "not understood"),
+        ("[toolpath]\nboundary_distance = 'exact'\n", "boundary_distance"),
     ],
 )
 def test_bad_job_file_is_one_line_input_error(tmp_path: Path, text: str, message: str) -> None:

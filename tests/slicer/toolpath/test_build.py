@@ -13,6 +13,7 @@ from slicer.config import JobConfig
 from slicer.extrusion import load_profile
 from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Layers
 from slicer.toolpath.build import ToolpathResult, compute_toolpath, layer_pattern
+from tests.slicer.toolpath.pattern_meshes import sliver_disc
 
 PROFILE = load_profile("ecoflex-0030")
 
@@ -365,6 +366,26 @@ def test_band_fitting_on_an_annulus_layer() -> None:
     assert fitted["width_error"]["contour"]["p90"] < 0.05
     assert fitted["width_error"]["contour"]["p90"] < 0.5 * eq9["width_error"]["contour"]["p90"]
     assert fitted["extrusion_starts"]["total"] == 1
+
+
+def test_eikonal_distance_keeps_contour_pitch_on_a_coarse_sliver_mesh() -> None:
+    # a 20 mm disc cut into ~2 mm triangles with slivers, as marching tets cut a layer: the
+    # heat method's distance wanders near the boundary, the eikonal one follows it
+    import dataclasses
+
+    v, f = sliver_disc(20.0, 2.0)
+    layers = Layers(v, f.astype(np.int64), np.zeros(len(f), np.int64), np.full(len(v), 0.6),
+                    np.tile([0.0, 0.0, 1.0], (len(v), 1)))
+    p90 = {}
+    for backend in ("eikonal", "heat"):
+        job = JobConfig()
+        job = dataclasses.replace(job, toolpath=dataclasses.replace(
+            job.toolpath, boundary_distance=backend))
+        res = compute_toolpath(layers, job, PROFILE, measure_baselines=False, workers=1)
+        assert abs(res.report["layer_volume_error"]) < 0.02
+        p90[backend] = res.report["width_error"]["contour"]["p90"]
+    assert p90["eikonal"] < 0.045
+    assert p90["eikonal"] < 0.8 * p90["heat"]
 
 
 def test_join_factor_is_validated() -> None:
