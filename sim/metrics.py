@@ -5,6 +5,11 @@ Definitions (f = ink fraction of a voxel, clipped to 1; m = model fraction of a 
 so a surface through voxel centres is not counted as a whole voxel in or out; V_m = sum of m):
 
 * infill ratio = sum of min(f, m) / V_m (ink within the model's share of each voxel).
+* interior infill ratio = the same over the voxels at least ``interior_depth_mm`` inside the
+  model surface (every voxel of the cube of that half-width around them inside): the density
+  of the part's core, the number a CT porosity analysis gives (paper: 99.47 %), free of the
+  surface's roughness and offset, which on a small part dominate the infill ratio (a 0.25 mm
+  scalloped skin on a 20 mm cube is about 4 % of its volume).
 * pore ratio = gel volume inside the printed body / V_m, where the printed body is the solid
   (f >= 0.5) closed over narrow openings (``scan_bridge_mm``) with its cavities filled, minus
   its one-voxel skin (a CT sees the skin's partial voxels as surface roughness, not
@@ -92,6 +97,8 @@ class Quality:
 
     Attributes:
         infill_ratio, pore_ratio, over_deposition, under_deposition: float, see module doc.
+        interior_infill_ratio: float, see module doc (nan when no voxel is that deep).
+        interior_depth_mm: float, mm, the depth of the interior.
         model_mm3: float, mm^3, model volume on the grid.
         model_mesh_mm3: float, mm^3, exact volume of the model mesh.
         deposited_mm3: float, mm^3, ink on the grid.
@@ -104,6 +111,8 @@ class Quality:
     """
 
     infill_ratio: float
+    interior_infill_ratio: float
+    interior_depth_mm: float
     pore_ratio: float
     over_deposition: float
     under_deposition: float
@@ -121,6 +130,8 @@ class Quality:
         """The report.json view (mm, mm^3, ratios)."""
         out: dict[str, Any] = {
             "infill_ratio": self.infill_ratio,
+            "interior_infill_ratio": self.interior_infill_ratio,
+            "interior_depth_mm": self.interior_depth_mm,
             "pore_ratio": self.pore_ratio,
             "over_deposition": self.over_deposition,
             "under_deposition": self.under_deposition,
@@ -142,7 +153,7 @@ class Quality:
 def inspect_deposit(deposit: Deposit, vertices: NDArray[np.float64],
                     faces: NDArray[np.integer], toolpath: Toolpath | None = None,
                     map_samples: int = 20_000, seed: int = 0,
-                    scan_bridge_mm: float = 0.5) -> Quality:
+                    scan_bridge_mm: float = 0.5, interior_depth_mm: float = 1.0) -> Quality:
     """Measure ``deposit`` against the closed model surface ``vertices`` (V, 3) mm, ``faces``.
 
     Args:
@@ -153,6 +164,8 @@ def inspect_deposit(deposit: Deposit, vertices: NDArray[np.float64],
         seed: of the surface sampling.
         scan_bridge_mm: float, mm, channels up to about twice this wide that open to the outside
             count as pores, not as surface (a scanner bridges them).
+        interior_depth_mm: float, mm, depth below the model surface of the interior whose
+            infill is reported separately.
     """
     grid = deposit.grid
     vv = grid.voxel_volume
@@ -166,6 +179,10 @@ def inspect_deposit(deposit: Deposit, vertices: NDArray[np.float64],
         raise ValueError("the model covers no voxel centre: grid too coarse or misplaced")
     shared = np.minimum(f, m)
     filled_in = float(shared.sum(dtype=np.float64)) * vv
+    interior = _interior(inside, round(interior_depth_mm / grid.voxel))
+    deep = float(m[interior].sum(dtype=np.float64))
+    interior_infill = (float(shared[interior].sum(dtype=np.float64)) / deep if deep > 0
+                       else float("nan"))
     ink_out = float((deposit.fill - shared).sum(dtype=np.float64)) * vv
     solid = deposit.fill >= 0.5
     # Like a scan: openings narrower than ~2 * scan_bridge_mm are bridged, then cavities filled.
@@ -181,6 +198,8 @@ def inspect_deposit(deposit: Deposit, vertices: NDArray[np.float64],
     layers = _per_layer(deposit, m, shared, toolpath) if toolpath is not None else None
     return Quality(
         infill_ratio=filled_in / model,
+        interior_infill_ratio=interior_infill,
+        interior_depth_mm=float(interior_depth_mm),
         pore_ratio=pore / model,
         over_deposition=ink_out / model,
         under_deposition=1.0 - filled_in / model,
@@ -194,6 +213,15 @@ def inspect_deposit(deposit: Deposit, vertices: NDArray[np.float64],
         surface=surface,
         layers=layers,
     )
+
+
+def _interior(inside: NDArray[np.bool_], depth: int) -> NDArray[np.bool_]:
+    """(nx, ny, nz) bool, voxels whose (2 depth + 1)^3 neighbourhood is all inside."""
+    if depth <= 0:
+        return inside.copy()
+    out: NDArray[np.bool_] = ndimage.minimum_filter(inside.view(np.uint8), size=2 * depth + 1,
+                                                    mode="constant", cval=0).astype(bool)
+    return out
 
 
 def _signed_distance(points: NDArray[np.float64], mesh: trimesh.Trimesh) -> NDArray[np.float64]:

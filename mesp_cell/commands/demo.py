@@ -138,7 +138,8 @@ def _summary(job_dir: Path) -> None:
         rows.append(
             (
                 "virtual print",
-                f"infill {100 * inspect.get('infill_ratio', 0):.2f}%, pores "
+                f"infill {100 * inspect.get('infill_ratio', 0):.2f}% (interior "
+                f"{100 * inspect.get('interior_infill_ratio', 0):.2f}%), pores "
                 f"{100 * inspect.get('pore_ratio', 0):.2f}%, surface error mean "
                 f"{surf.get('mean', float('nan')):.3f} mm",
             )

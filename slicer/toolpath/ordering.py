@@ -6,7 +6,9 @@ is placed against an already printed neighbour; loops at the same level go neare
 (``build`` passes the distance from the outer loop as the level of a band fitted between two
 boundaries: outer wall first, then across the band to the inner wall, so that consecutive
 lines are neighbours and join.)
-A closed loop starts at its point nearest to the nozzle. Stripes are printed as a path
+A closed loop starts at its point nearest to the nozzle, unless it hosts the short open line
+beside it (``splice.py``: a fitted band's extra line), which is then printed with it in one
+path. Stripes are printed as a path
 cover (``_order_cover``): every line is an edge between its two end nodes and joins pair
 nearby ends, each end at most once and never closing a cycle, so the chains of lines cover
 the component with few extrusion starts. Ends that need a join most (fewest options) choose
@@ -32,6 +34,7 @@ from scipy.spatial import cKDTree
 from slicer.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.resample import line_index
+from slicer.toolpath.splice import Splice, find_splices, spliced_points
 
 AUGMENT_DEPTH = 2  # longest chain of re-matched joins tried to free an end for a join
 SHORTEN_SWEEPS = 4  # passes of 2-opt exchanges that shorten the joins at an equal count
@@ -413,16 +416,39 @@ def order_lines(
         # 1.5 and 2.5 by rounding half to even)
         ring = np.floor(np.asarray(level) / max(level_step, 1e-9)).astype(np.int64)
     pos = np.asarray(start_pos, dtype=np.float64)
+    splices: dict[int, Splice] = {}
+    if level is not None and can_join is not None:
+        splices = find_splices(lines, idx, np.asarray(level, dtype=np.float64), can_join)
+        if splices:
+            # start the component beside the first loop that hosts an open line, so the
+            # loops printed before it end there and join it
+            first = min(splices.values(), key=lambda sp: (ring[sp.loop], level[sp.loop]))
+            pos = lines.points[first.near_first]
+    done = ~alive
     pieces: list[Piece] = []
     for r in np.unique(ring[alive]):
-        todo = np.flatnonzero(alive & (ring == r))
+        todo = np.flatnonzero(~done & (ring == r))
         while todo.size:
             dist = _entry_distance(lines, idx.start, idx.stop, todo, pos)
             k = int(np.argmin(dist))
             line = int(todo[k])
-            piece, pos = _piece(lines, int(idx.start[line]), int(idx.stop[line]), line, pos)
-            pieces.append(piece)
-            todo = np.delete(todo, k)
+            piece: Piece | None
+            piece, end = _piece(lines, int(idx.start[line]), int(idx.stop[line]), line, pos)
+            sp = splices.get(line)
+            if sp is not None and not done[sp.line] and can_join is not None:
+                runs, last = spliced_points(lines, idx, sp, pos)
+                prev = int(pieces[-1].points[-1]) if pieces else None
+                # splice unless it breaks the join into the loop that its usual entry makes
+                if (prev is None or can_join(prev, int(runs[0][0][0]))
+                        or not can_join(prev, int(piece.points[0]))):
+                    pieces.extend(Piece(run, lid) for run, lid in runs)
+                    done[sp.line] = True
+                    piece, end = None, lines.points[last]
+            if piece is not None:
+                pieces.append(piece)
+            pos = end
+            done[line] = True
+            todo = todo[~done[todo]]
     return pieces
 
 

@@ -96,6 +96,26 @@ def test_shifted_print_has_matching_over_and_under_deposition() -> None:
     assert np.median(q.surface.map_distance[near]) == pytest.approx(-0.5, abs=0.1)
 
 
+def test_interior_infill_ignores_the_skin_but_not_a_core_pore() -> None:
+    # an 8 mm box printed 0.5 mm short on the +x face: the infill ratio loses 1/16, the
+    # interior (1 mm below the surface) is whole; a 2 mm pore in the core shows in both
+    grid = VoxelGrid(origin=(-2.0, -2.0, -2.0), voxel=0.25, shape=(48, 48, 48))
+    box = _box((0.0, 0.0, 0.0), (8.0, 8.0, 8.0))
+    short = model_fraction(_box((0.0, 0.0, 0.0), (7.5, 8.0, 8.0)), grid)
+    q = inspect_deposit(_deposit_of(short, grid), box.vertices, box.faces)
+    assert q.infill_ratio == pytest.approx(1.0 - 0.5 / 8.0, rel=2e-3)
+    assert q.interior_infill_ratio == pytest.approx(1.0, abs=1e-6)
+    assert q.interior_depth_mm == 1.0
+    hole = model_fraction(_box((3.0, 3.0, 3.0), (5.0, 5.0, 5.0)), grid)
+    q = inspect_deposit(_deposit_of(np.clip(short - hole, 0.0, 1.0), grid), box.vertices,
+                        box.faces)
+    # the core is the 6 mm box 1 mm inside: 8 of its 216 mm^3 are the pore
+    assert q.interior_infill_ratio == pytest.approx(1.0 - 8.0 / 216.0, rel=2e-3)
+    thin = inspect_deposit(_deposit_of(short, grid), box.vertices, box.faces,
+                           interior_depth_mm=5.0)
+    assert np.isnan(thin.interior_infill_ratio)  # no voxel is 5 mm inside an 8 mm box
+
+
 def test_enclosed_cavity_is_a_pore() -> None:
     grid = VoxelGrid(origin=(-2.0, -2.0, -2.0), voxel=0.25, shape=(48, 48, 48))
     box = _box((0.0, 0.0, 0.0), (8.0, 8.0, 8.0))
@@ -147,5 +167,6 @@ def test_per_layer_attribution_adds_up() -> None:
     assert q.layers.over_mm3[q.layers.layer == 8][0] == pytest.approx(64.0, rel=0.02)
     assert q.layers.over_mm3[q.layers.layer < 8].sum() == pytest.approx(0.0, abs=1e-6)
     summary = q.summary()
-    assert set(summary) >= {"infill_ratio", "pore_ratio", "over_deposition",
+    assert set(summary) >= {"infill_ratio", "interior_infill_ratio", "pore_ratio",
+                            "over_deposition",
                             "surface_error_mm", "per_layer"}
