@@ -15,6 +15,17 @@ both ends, so a vertex next to the boundary gets its exact distance to the bound
 not to the nearest boundary vertex. The update is applied to all triangles at once (Jacobi
 passes, vectorised), starting from Dijkstra's graph distance, an upper bound; a pass revisits
 only the triangles around vertices that changed in the previous one, until nothing changes.
+
+Where two fronts meet (the medial axis, a disc's centre) the distance has a kink that the
+linear interpolation along an edge cuts, so there it falls short by up to about half an edge.
+On a disc that is the difference between an innermost contour and a hole at the centre (the
+hemisphere's layers: a 5.8 mm hole in a 40 mm disc). A planar component needs no
+propagation at all: its distance from the boundary is the Euclidean distance to the nearest
+boundary segment (in a plane the nearest boundary point is always in sight), exact at the
+medial axis too (``planar_boundary_distance``). On a curved component the distance is never
+below the straight-line distance to the boundary segments, which is nearly the geodesic one
+on a gently curved layer; ``surface_distance`` takes the larger of the two, which repairs the
+kinks wherever the layer does not fold back.
 """
 
 from __future__ import annotations
@@ -25,6 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
 
 from slicer.tolerance import tol
 
@@ -128,3 +140,100 @@ def eikonal_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
         t = new
         active = np.unique(incidence[changed].indices) if changed.size else changed
     return EikonalResult(t, passes, active.size == 0)
+
+
+PLANAR_TOLERANCE = 1e-6  # flat: every vertex within this x the component's size of a plane
+SUBSEGMENTS = 0.5  # boundary pieces searched are at most this x the median boundary edge
+NEAREST_PIECES = 16  # boundary pieces checked exactly per vertex
+
+
+def is_planar(vertices: NDArray[np.float64], faces: NDArray[np.integer],
+              tolerance: float = PLANAR_TOLERANCE) -> bool:
+    """True if the vertices used by ``faces`` lie on one plane (relative ``tolerance``)."""
+    p = np.asarray(vertices, dtype=np.float64)[np.unique(np.asarray(faces))]
+    if len(p) < 4:
+        return True
+    q = p - p.mean(axis=0)
+    size = float(np.linalg.norm(q, axis=1).max())
+    if size <= 0.0:
+        return True
+    normal = np.linalg.svd(q, full_matrices=False)[2][-1]
+    return bool(np.abs(q @ normal).max() <= tolerance * size + tol.zero)
+
+
+def segment_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
+                     edges: NDArray[np.integer]) -> NDArray[np.float64]:
+    """(n,) float64, mm, Euclidean distance of each vertex to the nearest of ``edges``.
+
+    edges: (B, 2) vertex ids of segments (e.g. boundary edges). They are cut into pieces of
+    at most SUBSEGMENTS x their median length; each vertex checks the NEAREST_PIECES pieces
+    with the nearest midpoints exactly. Vertices not used by a face get 0; without edges
+    every vertex gets inf.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    out = np.zeros(len(v))
+    used = np.unique(np.asarray(faces, dtype=np.int64))
+    if len(e) == 0:
+        out[used] = np.inf
+        return out
+    a, b = v[e[:, 0]], v[e[:, 1]]
+    length = np.linalg.norm(b - a, axis=1)
+    piece = SUBSEGMENTS * max(float(np.median(length)), tol.zero)
+    cuts = np.maximum(np.ceil(length / piece).astype(np.int64), 1)
+    owner = np.repeat(np.arange(len(e)), cuts)
+    k = np.arange(len(owner)) - np.repeat(np.cumsum(cuts) - cuts, cuts)
+    t0, t1 = k / cuts[owner], (k + 1) / cuts[owner]
+    d = (b - a)[owner]
+    pa = a[owner] + t0[:, None] * d
+    pb = a[owner] + t1[:, None] * d
+    tree = cKDTree(0.5 * (pa + pb))
+    kk = min(NEAREST_PIECES, len(pa))
+    x = v[used]
+    _, near = tree.query(x, k=kk)
+    near = near.reshape(len(x), kk)
+    sa, sb = pa[near], pb[near]  # (u, kk, 3)
+    ab = sb - sa
+    t = np.einsum("ukj,ukj->uk", x[:, None, :] - sa, ab) / np.maximum(
+        np.einsum("ukj,ukj->uk", ab, ab), tol.zero)
+    foot = sa + np.clip(t, 0.0, 1.0)[..., None] * ab
+    out[used] = np.linalg.norm(x[:, None, :] - foot, axis=2).min(axis=1)
+    return out
+
+
+def planar_boundary_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer]
+                             ) -> NDArray[np.float64]:
+    """(n,) float64, mm, Euclidean distance of each vertex to the nearest boundary segment:
+    the exact distance from the boundary of a flat component (``segment_distance``)."""
+    from slicer.toolpath.surface import boundary_edges
+
+    return segment_distance(vertices, faces, boundary_edges(faces))
+
+
+def surface_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
+                     sources: NDArray[np.integer]) -> NDArray[np.float64]:
+    """(n,) float64, mm, distance over the surface from the boundary vertices ``sources``
+    (a whole boundary, or some of its loops), as accurate as the component allows.
+
+    Flat, with the whole boundary as source: the exact Euclidean distance. Otherwise the
+    eikonal distance, raised to the Euclidean distance from the source segments (the
+    boundary edges with both ends in ``sources``) where it falls below it: a straight line
+    is never longer than a path on the surface, so that only undoes the cut at the kinks
+    (a curved disc's centre), and where the surface folds back (a shortcut through the air)
+    the eikonal distance is the larger and stays.
+    """
+    from slicer.toolpath.surface import boundary_edges
+
+    f = np.asarray(faces, dtype=np.int64)
+    src = np.unique(np.asarray(sources, dtype=np.int64).ravel())
+    edges = boundary_edges(f)
+    is_src = np.zeros(len(vertices), dtype=bool)
+    is_src[src] = True
+    own = edges[is_src[edges[:, 0]] & is_src[edges[:, 1]]]
+    whole = len(own) == len(edges)
+    if whole and is_planar(vertices, f):
+        return segment_distance(vertices, f, own)
+    d = eikonal_distance(vertices, f, src).distance
+    if len(own) == 0:  # sources that are not boundary loops: nothing straight to compare
+        return d
+    return np.maximum(d, np.where(np.isfinite(d), segment_distance(vertices, f, own), 0.0))

@@ -111,9 +111,9 @@ def boundary_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     if backend == "heat":
         d_local = _heat_dirichlet(v_local, f_local, src, robust)
     elif backend == "eikonal":
-        from slicer.toolpath.eikonal import eikonal_distance
+        from slicer.toolpath.eikonal import surface_distance
 
-        d_local = eikonal_distance(v_local, f_local, src).distance
+        d_local = surface_distance(v_local, f_local, src)
     elif backend == "potpourri3d":
         import potpourri3d as pp3d
 
@@ -176,9 +176,9 @@ def distance_from(vertices: NDArray[np.float64], faces: NDArray[np.integer],
         raise InputError("no source vertex lies on the layer component",
                          "pass vertex ids of the component (e.g. one boundary loop)")
     if backend == "eikonal":
-        from slicer.toolpath.eikonal import eikonal_distance
+        from slicer.toolpath.eikonal import surface_distance
 
-        d_local = eikonal_distance(v[used], f_local, src).distance
+        d_local = surface_distance(v[used], f_local, src)
     else:
         d_local = _heat_dirichlet(v[used], f_local, src, robust)
     d_local[src] = 0.0

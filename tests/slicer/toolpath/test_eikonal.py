@@ -7,7 +7,13 @@ import pytest
 from scipy.spatial import Delaunay
 
 from slicer.toolpath import geodesic
-from slicer.toolpath.eikonal import eikonal_distance, triangle_update
+from slicer.toolpath.eikonal import (
+    eikonal_distance,
+    is_planar,
+    planar_boundary_distance,
+    surface_distance,
+    triangle_update,
+)
 from slicer.toolpath.surface import boundary_vertices
 from tests.slicer.toolpath.pattern_meshes import disc, dome
 
@@ -119,3 +125,47 @@ def test_pass_limit_reports_not_converged_with_an_upper_bound() -> None:
     cut = eikonal_distance(v, f, src, max_passes=1)
     assert full.converged and not cut.converged and cut.passes == 1
     assert np.all(cut.distance >= full.distance - 1e-9)
+
+
+def test_flat_components_get_the_exact_distance_even_on_the_medial_axis() -> None:
+    v, f = _coarse_square(20.0, 2.0)
+    assert is_planar(v, f)
+    d = planar_boundary_distance(v, f)
+    exact = np.minimum.reduce([v[:, 0], 20.0 - v[:, 0], v[:, 1], 20.0 - v[:, 1]])
+    assert np.abs(d - exact).max() < 1e-9
+    # boundary_distance picks it for a flat component: the disc's centre is not cut short
+    dv, df = disc(20.0, 2.0, jitter=0.3)
+    r = np.linalg.norm(dv[:, :2], axis=1)
+    flat = geodesic.boundary_distance(dv, df, backend="eikonal")
+    ring = np.max(r[np.isclose(r, r.max())])  # the boundary polygon's vertices
+    inside = r < ring * np.cos(np.pi / 32)  # beyond the polygon's chords
+    assert np.abs(flat[inside] - (ring * np.cos(np.pi / 63) - r[inside])).max() < 0.05
+    centre = int(np.argmin(r))
+    propagated = eikonal_distance(dv, df, np.flatnonzero(boundary_vertices(df, len(dv))))
+    assert flat[centre] > propagated.distance[centre]
+
+
+def test_a_curved_component_is_not_planar() -> None:
+    v, f = disc(15.0, 1.0)
+    assert is_planar(v, f)
+    assert not is_planar(dome(v, 2.0, 15.0), f)
+    # tilted but flat is still planar
+    tilt = v @ np.array([[1.0, 0.0, 0.0], [0.0, 0.8, 0.6], [0.0, -0.6, 0.8]])
+    assert is_planar(tilt, f)
+
+
+def test_curved_disc_centre_is_not_cut_short() -> None:
+    v, f = disc(15.0, 1.0)
+    v = dome(v, 5.0, 15.0)
+    src = np.flatnonzero(boundary_vertices(f, len(v)))
+    top = int(np.argmin(np.linalg.norm(v[:, :2], axis=1)))
+    r = np.linspace(0.0, 15.0, 20001)
+    slope = 2.0 * 5.0 * r / 15.0**2
+    meridian = float(np.sum(0.5 * (np.sqrt(1 + slope[1:] ** 2) + np.sqrt(1 + slope[:-1] ** 2))
+                            * np.diff(r)))
+    propagated = eikonal_distance(v, f, src).distance[top]
+    repaired = surface_distance(v, f, src)[top]
+    assert repaired >= propagated
+    chord = np.linalg.norm(v[src] - v[top], axis=1).min()
+    assert repaired >= chord - 0.01 > propagated  # at least the straight line to the rim
+    assert repaired <= meridian  # never longer than the surface path
