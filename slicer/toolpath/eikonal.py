@@ -69,6 +69,52 @@ def _graph_distance(v: NDArray[np.float64], f: NDArray[np.int64],
     return out
 
 
+class _Corners(NamedTuple):
+    """The geometry of every triangle rotation (a, b, c), r = k * m + face, all (3m,).
+
+    a, b, c: int64 vertex ids; ee = |b - a|^2, p = (a - c) . (b - a), q = |a - c|^2 (mm^2);
+    bc = |b - c| (mm). The update needs nothing else: |a + l (b - a) - c|^2 = q + 2 l p +
+    l^2 ee.
+    """
+
+    a: NDArray[np.int64]
+    b: NDArray[np.int64]
+    c: NDArray[np.int64]
+    ee: NDArray[np.float64]
+    p: NDArray[np.float64]
+    q: NDArray[np.float64]
+    bc: NDArray[np.float64]
+
+
+def _corners(v: NDArray[np.float64], f: NDArray[np.int64]) -> _Corners:
+    a = np.concatenate([f[:, k] for k in range(3)])
+    b = np.concatenate([f[:, (k + 1) % 3] for k in range(3)])
+    c = np.concatenate([f[:, (k + 2) % 3] for k in range(3)])
+    d0 = v[a] - v[c]
+    e = v[b] - v[a]
+    return _Corners(a, b, c, np.einsum("ij,ij->i", e, e), np.einsum("ij,ij->i", d0, e),
+                    np.einsum("ij,ij->i", d0, d0), np.linalg.norm(v[b] - v[c], axis=1))
+
+
+def _update(g: _Corners, r: NDArray[np.int64], t: NDArray[np.float64]
+            ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Candidates for the corners c of the rotations ``r`` (see ``triangle_update``)."""
+    ta, tb = t[g.a[r]], t[g.b[r]]
+    ee, p, q = g.ee[r], g.p[r], g.q[r]
+    finite = np.isfinite(ta) & np.isfinite(tb)
+    dt = np.where(finite, np.where(finite, tb, 0.0) - np.where(finite, ta, 0.0), 0.0)
+    cross = np.maximum(ee * q - p * p, 0.0)
+    room = ee - dt * dt
+    inner = room > tol.zero * np.maximum(ee, tol.zero)
+    lam = np.where(inner, (-p - dt * np.sqrt(cross / np.where(inner, room, 1.0)))
+                   / np.maximum(ee, tol.zero), np.where(dt > 0.0, 0.0, 1.0))
+    lam = np.clip(lam, 0.0, 1.0)
+    val = ta + lam * dt + np.sqrt(np.maximum(q + 2.0 * lam * p + lam * lam * ee, 0.0))
+    # one corner still unknown (inf): reach c along the edge from the known one
+    edge = np.minimum(ta + np.sqrt(q), tb + g.bc[r])
+    return np.where(finite, val, edge), g.c[r]
+
+
 def triangle_update(v: NDArray[np.float64], f: NDArray[np.int64], t: NDArray[np.float64]
                     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Candidate distances of each triangle's corners from their opposite edges.
@@ -80,30 +126,9 @@ def triangle_update(v: NDArray[np.float64], f: NDArray[np.int64], t: NDArray[np.
 
     Returns ((3m,) float64 mm candidates, (3m,) int64 the corner each is for).
     """
-    cand = []
-    ids = []
-    for k in range(3):
-        a, b, c = f[:, k], f[:, (k + 1) % 3], f[:, (k + 2) % 3]
-        d0 = v[a] - v[c]
-        e = v[b] - v[a]
-        ta, tb = t[a], t[b]
-        finite = np.isfinite(ta) & np.isfinite(tb)
-        dt = np.where(finite, np.where(finite, tb, 0.0) - np.where(finite, ta, 0.0), 0.0)
-        ee = np.einsum("ij,ij->i", e, e)
-        p = np.einsum("ij,ij->i", d0, e)
-        cross = np.maximum(ee * np.einsum("ij,ij->i", d0, d0) - p * p, 0.0)
-        room = ee - dt * dt
-        inner = room > tol.zero * np.maximum(ee, tol.zero)
-        lam = np.where(inner, (-p - dt * np.sqrt(cross / np.where(inner, room, 1.0)))
-                       / np.maximum(ee, tol.zero), np.where(dt > 0.0, 0.0, 1.0))
-        lam = np.clip(lam, 0.0, 1.0)
-        val = ta + lam * dt + np.linalg.norm(d0 + lam[:, None] * e, axis=1)
-        # one corner still unknown (inf): reach c along the edge from the known one
-        edge = np.minimum(ta + np.sqrt(np.einsum("ij,ij->i", d0, d0)),
-                          tb + np.linalg.norm(v[b] - v[c], axis=1))
-        cand.append(np.where(finite, val, edge))
-        ids.append(c)
-    return np.concatenate(cand), np.concatenate(ids)
+    f64 = np.asarray(f, dtype=np.int64)
+    return _update(_corners(np.asarray(v, dtype=np.float64), f64),
+                   np.arange(3 * len(f64), dtype=np.int64), t)
 
 
 def eikonal_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
@@ -123,6 +148,7 @@ def eikonal_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
         return EikonalResult(np.full(n, np.inf), 0, True)
     t = _graph_distance(v, f, src)
     t[src] = 0.0
+    g = _corners(v, f)
     # faces around each vertex, to revisit only what a change can affect
     incidence = sp.csr_matrix((np.ones(3 * m, dtype=np.int8),
                                (f.ravel(), np.repeat(np.arange(m), 3))), shape=(n, m))
@@ -132,7 +158,7 @@ def eikonal_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     passes = 0
     while active.size and passes < max_passes:
         passes += 1
-        cand, ids = triangle_update(v, f[active], t)
+        cand, ids = _update(g, np.concatenate([active + k * m for k in range(3)]), t)
         new = t.copy()
         np.minimum.at(new, ids, cand)
         new[is_src] = 0.0
