@@ -19,27 +19,52 @@ _SELECTOR = re.compile(
     r"^(?P<kind>bottom|top)(?::(?P<cone>[-+0-9.eE]+))?$"
     r"|^normal:(?P<n>[-+0-9.eE]+,[-+0-9.eE]+,[-+0-9.eE]+)(?::(?P<ncone>[-+0-9.eE]+))?$"
 )
+_WHERE = re.compile(r"^(?P<axis>[xyz])(?P<op>[<>])(?P<value>[-+0-9.eE]+)$")
 
 
 @dataclass(frozen=True)
 class CriticalSelector:
-    """Boundary faces whose outward normal lies within ``cone_deg`` of ``direction``.
+    """Boundary faces whose outward normal lies within ``cone_deg`` of ``direction``, in
+    patches whose centre satisfies every condition of ``where``.
 
     Attributes:
         direction: (3,) float, unit axis of the cone.
         cone_deg: float, deg, half-angle of the cone.
         text: the selector as the user wrote it.
+        where: ((axis 0-2, "<" or ">", value mm), ...): conditions on the area-weighted
+            centre of each patch, in the model's frame (mm, as in model.ply); e.g.
+            ``bottom:30@z<1`` keeps the bottom face but not a cavity's ceiling.
     """
 
     direction: tuple[float, float, float]
     cone_deg: float
     text: str
+    where: tuple[tuple[int, str, float], ...] = ()
+
+    def accepts(self, centre: np.ndarray) -> bool:
+        """True if the point ``centre`` (3,) mm meets every ``where`` condition."""
+        return all(centre[axis] < value if op == "<" else centre[axis] > value
+                   for axis, op, value in self.where)
 
     @staticmethod
     def parse(text: str) -> CriticalSelector:
-        """Parse ``bottom[:DEG]``, ``top[:DEG]`` or ``normal:X,Y,Z[:DEG]`` (default 45 deg)."""
-        match = _SELECTOR.match(text.strip())
-        fix = "write bottom[:DEG], top[:DEG] or normal:X,Y,Z[:DEG], e.g. top:30"
+        """Parse ``bottom[:DEG]``, ``top[:DEG]`` or ``normal:X,Y,Z[:DEG]`` (default 45 deg),
+        each optionally followed by position conditions ``@z<MM``, ``@x>MM``, ..."""
+        fix = ("write bottom[:DEG], top[:DEG] or normal:X,Y,Z[:DEG], optionally with @z<MM "
+               "(or @x, @y, >), e.g. top:30 or bottom:30@z<1")
+        head, *conditions = text.strip().split("@")
+        where = []
+        for cond in conditions:
+            found = _WHERE.match(cond.strip())
+            if found is None:
+                raise InputError(f"critical selector '{text}': condition '@{cond}' is not "
+                                 "understood", fix)
+            try:
+                value = float(found["value"])
+            except ValueError as exc:
+                raise InputError(f"critical selector '{text}' has a bad number", fix) from exc
+            where.append(("xyz".index(found["axis"]), found["op"], value))
+        match = _SELECTOR.match(head.strip())
         if match is None:
             raise InputError(f"critical selector '{text}' is not understood", fix)
         try:
@@ -57,7 +82,8 @@ class CriticalSelector:
             raise InputError(f"critical selector '{text}' has a bad number", fix) from exc
         if not 0.0 < cone < 90.0:
             raise InputError(f"critical selector '{text}': cone {cone} deg", "use 0 < DEG < 90")
-        return CriticalSelector(direction=axis, cone_deg=cone, text=text.strip())
+        return CriticalSelector(direction=axis, cone_deg=cone, text=text.strip(),
+                                where=tuple(where))
 
 
 @dataclass(frozen=True)

@@ -118,6 +118,7 @@ def select_critical_regions(
         starts = np.concatenate([[0], np.cumsum(counts)])
         found: list[CriticalRegion] = []
         dropped = 0
+        elsewhere = 0
         for lab in range(len(counts)):  # loop over patches, not faces
             idx = chosen[order[starts[lab]:starts[lab + 1]]]
             if len(idx) < min_faces:
@@ -125,6 +126,13 @@ def select_critical_regions(
                 continue
             normals = bnd.normal[idx]
             area = bnd.area[idx]
+            if sel.where:
+                centre = (ops.vertices[bnd.faces[idx]].mean(axis=1) * area[:, None]).sum(
+                    axis=0) / max(float(area.sum()), 1e-300)
+                if not sel.accepts(centre):
+                    elsewhere += 1
+                    taken[idx] = False  # a later selector may still take these faces
+                    continue
             mean_normal = (normals * area[:, None]).sum(axis=0)
             sign = 1.0 if mean_normal[2] >= 0 else -1.0
             found.append(
@@ -143,6 +151,11 @@ def select_critical_regions(
                 f"critical selector '{sel.text}': dropped {dropped} patch(es) with fewer than "
                 f"{min_faces} faces"
             )
+        if elsewhere:
+            notes.append(f"critical selector '{sel.text}': left out {elsewhere} patch(es) "
+                         "outside its @ conditions")
+        if sel.where and not found:
+            notes.append(f"critical selector '{sel.text}' kept no patch")
         found.sort(key=lambda r: -r.area)
         regions.extend(found)
     return CriticalSelection(regions=tuple(regions), notes=tuple(notes))

@@ -42,7 +42,8 @@ def register(sub: Any) -> None:
         "--critical",
         action="append",
         metavar="SELECTOR",
-        help="critical region: bottom[:DEG] | top[:DEG] | normal:X,Y,Z[:DEG] (repeatable; "
+        help="critical region: bottom[:DEG] | top[:DEG] | normal:X,Y,Z[:DEG], optionally "
+        "with position conditions on each patch's centre, e.g. bottom:30@z<1 (repeatable; "
         "replaces the job file's list)",
     )
     p.add_argument("--planar", action="store_true", help="planar slicing (g = z)")

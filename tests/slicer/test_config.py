@@ -2,6 +2,7 @@
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from slicer.config import CriticalSelector, JobConfig, load_job
@@ -35,6 +36,8 @@ def test_job_file_overrides_defaults(tmp_path: Path) -> None:
         ("[slicing\n", "not valid TOML"),
         ("[slicing]\ncritical = ['sideways']\n", "not understood"),
         ("[toolpath]\nboundary_distance = 'exact'\n", "boundary_distance"),
+        ("[slicing]\ncritical = ['bottom@q<1']\n", "condition '@q<1' is not understood"),
+        ("[slicing]\ncritical = ['bottom@z<1e']\n", "bad number"),
     ],
 )
 def test_bad_job_file_is_one_line_input_error(tmp_path: Path, text: str, message: str) -> None:
@@ -65,7 +68,14 @@ def test_critical_selector_parse(
     assert sel.direction == direction and sel.cone_deg == cone
 
 
-@pytest.mark.parametrize("text", ["top:95", "normal:0,0,0", "left", "top:x"])
+def test_selector_position_conditions() -> None:
+    sel = CriticalSelector.parse("bottom:30@z<1@x>-5")
+    assert sel.cone_deg == 30.0 and sel.where == ((2, "<", 1.0), (0, ">", -5.0))
+    assert sel.accepts(np.array([0.0, 0.0, 0.5])) and not sel.accepts(np.array([0.0, 0.0, 2.0]))
+    assert CriticalSelector.parse("top").where == ()
+
+
+@pytest.mark.parametrize("text", ["top:95", "normal:0,0,0", "left", "top:x", "top@z=1"])
 def test_bad_critical_selector(text: str) -> None:
     with pytest.raises(InputError):
         CriticalSelector.parse(text)

@@ -57,3 +57,20 @@ def test_no_match_noted_and_faces_not_reused(box: TetMesh) -> None:
     sel = select_critical_regions(ops, _sel("normal:1,1,1:10", "top", "top:60"))
     assert len(sel.regions) == 1
     assert any("matched no boundary face" in n for n in sel.notes)
+
+
+def test_position_condition_keeps_only_matching_patches() -> None:
+    a = box_mesh(n=(2, 2, 2), size=(2, 2, 2))
+    b = box_mesh(n=(2, 2, 2), size=(2, 2, 2))
+    verts = np.vstack([a.vertices, b.vertices + np.array([5.0, 0.0, 1.0])])
+    tets = np.vstack([a.tets, b.tets + len(a.vertices)])
+    ops = build_operators(TetMesh(verts, tets))
+    sel = select_critical_regions(ops, _sel("top@z>2.5"))
+    assert len(sel.regions) == 1
+    assert float(ops.vertices[sel.regions[0].vertices, 2].mean()) == 3.0
+    assert any("left out 1 patch" in n for n in sel.notes)
+    # the faces it left out are still free for the next selector
+    both = select_critical_regions(ops, _sel("top@z>2.5@x>4", "top"))
+    assert sorted(float(ops.vertices[r.vertices, 2].mean()) for r in both.regions) == [2.0, 3.0]
+    none = select_critical_regions(ops, _sel("top@z>10"))
+    assert none.regions == () and any("kept no patch" in n for n in none.notes)
