@@ -30,12 +30,16 @@ def test_box_bottom_and_top(box: TetMesh) -> None:
     assert bottom.area == 64.0
 
 
-def test_one_selector_two_patches() -> None:
+def _two_boxes() -> TetMesh:
+    """Two 2 mm boxes, the second 5 mm along x and 1 mm higher: tops at z = 2 and 3."""
     a = box_mesh(n=(2, 2, 2), size=(2, 2, 2))
     b = box_mesh(n=(2, 2, 2), size=(2, 2, 2))
     verts = np.vstack([a.vertices, b.vertices + np.array([5.0, 0.0, 1.0])])
-    tets = np.vstack([a.tets, b.tets + len(a.vertices)])
-    ops = build_operators(TetMesh(verts, tets))
+    return TetMesh(verts, np.vstack([a.tets, b.tets + len(a.vertices)]))
+
+
+def test_one_selector_two_patches() -> None:
+    ops = build_operators(_two_boxes())
     sel = select_critical_regions(ops, _sel("top"))
     assert len(sel.regions) == 2
     tops = sorted(float(ops.vertices[r.vertices, 2].mean()) for r in sel.regions)
@@ -60,11 +64,7 @@ def test_no_match_noted_and_faces_not_reused(box: TetMesh) -> None:
 
 
 def test_position_condition_keeps_only_matching_patches() -> None:
-    a = box_mesh(n=(2, 2, 2), size=(2, 2, 2))
-    b = box_mesh(n=(2, 2, 2), size=(2, 2, 2))
-    verts = np.vstack([a.vertices, b.vertices + np.array([5.0, 0.0, 1.0])])
-    tets = np.vstack([a.tets, b.tets + len(a.vertices)])
-    ops = build_operators(TetMesh(verts, tets))
+    ops = build_operators(_two_boxes())
     sel = select_critical_regions(ops, _sel("top@z>2.5"))
     assert len(sel.regions) == 1
     assert float(ops.vertices[sel.regions[0].vertices, 2].mean()) == 3.0
