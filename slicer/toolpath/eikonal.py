@@ -258,7 +258,7 @@ def surface_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     own = edges[is_src[edges[:, 0]] & is_src[edges[:, 1]]]
     whole = len(own) == len(edges)
     if whole and is_planar(vertices, f):
-        return segment_distance(vertices, f, own)
+        return planar_boundary_distance(vertices, f)
     d = eikonal_distance(vertices, f, src).distance
     if len(own) == 0:  # sources that are not boundary loops: nothing straight to compare
         return d
