@@ -102,8 +102,14 @@ SHORT_JOIN = 2.0  # join limit (x W) retried where the configured one misses the
 SHORT_JOIN_ABOVE = 0.01  # ... by more than this (relative)
 THIN_BAND_FIT = 1.5  # fit_bands: widest band below this x W -> the one centre line
 PITCH_SMOOTHING = 2.0  # contour pitch blended over this x W where the line count changes
-CENTRE_WIDTH_SCALE = (0.5, 1.5)  # a centre line's width may be scaled to its band this far
+CENTRE_WIDTH_SCALE = (0.5, 1.5)  # a line's width may be scaled by the nozzle speed this far
+FLOW_FIT_ABOVE = 0.02  # ... where the spacing misses the component's volume by more
 TINY_LOOP = 2.0  # closed lines shorter than this x W are dropped (a blob, not a loop)
+NARROW_STRIPES = 2.0  # a stripe-layer component narrower than this x W ...
+NARROW_SHARE = 0.5  # ... over at least this share of its area gets contours
+UNCOVERED = 0.8  # band fitting fails where an area is farther than this x spacing from lines
+UNCOVERED_SHARE = 0.02  # ... more than this share of the component (eq. 9 lines fill them)
+LONE_LINE = 2.0  # no other line within this x W: the line fills its band alone (_measure)
 
 
 def layer_pattern(index: int, first: str) -> int:
@@ -182,12 +188,15 @@ class ComponentResult:
         connector_mm3: deposited volume of the connectors that join lines (included in
             deposited_mm3, so the volume match accounts for it).
         width_error: (k,) float64, |spacing - W| / W at the line points (deformed method).
+        width_lone_points: how many of those are on lone lines, measured by their band.
         width_error_undeformed: (k',) float64, same, lines computed on the original layer.
         width_error_poisson: (k'',) float64, Poisson alternative (stripe layers), else empty.
         timings: stage -> s.
         error: why the component was skipped ('' if it was not).
         fallback: '' or how a component too narrow for its pattern was printed instead
-            ('contour' on a stripe layer, 'centre-line': one line along the band's middle).
+            ('contour' on a stripe layer, 'centre-line': one line along the band's middle),
+            or 'holes-filled': fitted contours left holes (the component is no band),
+            filled with eq. 9's iso-lines.
     """
 
     waypoints: Waypoints
@@ -204,6 +213,7 @@ class ComponentResult:
     width_error: NDArray[np.float64]
     width_error_undeformed: NDArray[np.float64]
     width_error_poisson: NDArray[np.float64]
+    width_lone_points: int = 0
     timings: dict[str, float] = field(default_factory=dict)
     error: str = ""
     fallback: str = ""
@@ -295,6 +305,9 @@ class _Surface:
         self.perimeter = perimeter
         self._sides: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
         self._smoother: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
+        self._face_area: NDArray[np.float64] | None = None
+        # fitted contours leave holes here (band_fit_covers): eq. 9 lines fill them
+        self.fill_holes = False
 
     def sides(self) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
         """(n,) distances from the longest boundary loop and from all the others; None for
@@ -314,6 +327,62 @@ class _Surface:
                                          backend=self.backend),
                            distance_from(self.vertices, self.faces, inner, backend=self.backend))
         return self._sides
+
+    def narrow_share(self, half_width: float) -> float:
+        """Share of the area where the band is narrower than 2 x half_width: farther than
+        half_width from every point at least half_width from the boundary."""
+        if len(self.faces) == 0:
+            return 0.0
+        wide = np.flatnonzero(self.distance >= half_width)
+        if len(wide) == 0:
+            return 1.0
+        from slicer.toolpath.geodesic import distance_from
+
+        reach = distance_from(self.vertices, self.faces, wide, backend=self.backend)
+        area = 0.5 * np.linalg.norm(np.cross(
+            self.vertices[self.faces[:, 1]] - self.vertices[self.faces[:, 0]],
+            self.vertices[self.faces[:, 2]] - self.vertices[self.faces[:, 0]]), axis=1)
+        narrow = reach[self.faces].mean(axis=1) > half_width
+        return float(area[narrow].sum() / max(area.sum(), tol.zero))
+
+    def line_gap(self, lines: SurfaceLines) -> NDArray[np.float64]:
+        """(m,) float64, distance (surface units) from each face centre to the nearest
+        line segment (inf without lines)."""
+        from slicer.toolpath.eikonal import points_to_segments
+
+        p = lines.points
+        seg = np.flatnonzero(lines.line[1:] == lines.line[:-1])
+        centre = self.vertices[self.faces].mean(axis=1)
+        if len(seg) == 0:
+            return np.full(len(self.faces), np.inf)
+        return points_to_segments(centre, p[seg], p[seg + 1])
+
+    def band_fit_covers(self, spacing: float) -> bool:
+        """Whether contours fitted to the band at ``spacing`` leave no hole: at most
+        UNCOVERED_SHARE of the area farther than UNCOVERED x spacing from every line.
+
+        The band model (a whole number of lines between the outer loop and the others)
+        holds on a wall; where the component is no band (a junction: a solid spot between
+        two holes, the aorta's plaque between its lumens) the lines of the two families
+        and the medial line can miss whole areas. True without band fitting."""
+        sides = self.sides() if self.fit_bands else None
+        if sides is None:
+            return True
+        from slicer.toolpath.contours import two_sided_contour_lines
+
+        smooth = self.smoother(PITCH_SMOOTHING * spacing) if PITCH_SMOOTHING > 0 else None
+        lines = two_sided_contour_lines(self.vertices, self.faces, *sides, spacing, smooth)
+        hole = self.line_gap(lines) > UNCOVERED * spacing
+        return float(self.face_area[hole].sum()) <= UNCOVERED_SHARE * self.face_area.sum()
+
+    @property
+    def face_area(self) -> NDArray[np.float64]:
+        """(m,) float64, face areas (surface units^2)."""
+        if self._face_area is None:
+            v, f = self.vertices, self.faces
+            self._face_area = 0.5 * np.linalg.norm(
+                np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+        return self._face_area
 
     def contour_level(self) -> NDArray[np.float64]:
         """(n,) mm, the value contours are printed in increasing order of: the distance
@@ -347,31 +416,20 @@ class _Surface:
         return self._direction
 
     def centre_lines(self) -> SurfaceLines:
-        """One line along the middle of a band with holes: u = 1/2 of the harmonic u that
-        is 0 on the longest boundary loop and 1 on the others (empty with a single loop)."""
-        from scipy.sparse.linalg import spsolve
+        """One line along the middle of a band with holes, where the distances from the
+        longest boundary loop and from the others are equal (empty with a single loop).
 
+        Why not the 1/2 level of a harmonic function (0 on one side, 1 on the other): on a
+        curved band it sits off the middle (an annulus: at the geometric mean radius; a
+        tube's 2.5 mm wall: 0.05 mm inwards, one voxel of the virtual print)."""
         from slicer.toolpath.isolines import iso_lines
         from slicer.toolpath.lines import empty_lines
-        from slicer.toolpath.surface import boundary_loops, cotan_laplacian
 
-        loops = boundary_loops(self.faces)
-        if len(loops) < 2:
+        sides = self.sides()
+        if sides is None:
             return empty_lines()
-        length = [float(np.linalg.norm(self.vertices[lp] - self.vertices[np.roll(lp, 1)],
-                                       axis=1).sum()) for lp in loops]
-        outer = int(np.argmax(length))
-        n = len(self.vertices)
-        fixed = np.zeros(n, dtype=bool)
-        u = np.zeros(n)
-        for i, lp in enumerate(loops):
-            fixed[lp] = True
-            u[lp] = 0.0 if i == outer else 1.0
-        lap = cotan_laplacian(self.vertices, self.faces, robust=True).tocsr()
-        free = np.flatnonzero(~fixed)
-        if free.size:
-            rhs = -lap[free][:, np.flatnonzero(fixed)] @ u[fixed]
-            u[free] = spsolve(lap[free][:, free].tocsc(), rhs)
+        d_out, d_in = sides
+        u = d_out / np.maximum(d_out + d_in, tol.zero)
         return iso_lines(self.vertices, self.faces, u, np.array([0.5]))
 
     def lines(self, pattern: int, spacing: float, poisson: bool = False) -> SurfaceLines:
@@ -389,7 +447,20 @@ class _Surface:
                 from slicer.toolpath.contours import two_sided_contour_lines
 
                 smooth = self.smoother(PITCH_SMOOTHING * spacing) if PITCH_SMOOTHING > 0 else None
-                return two_sided_contour_lines(self.vertices, self.faces, *sides, spacing, smooth)
+                fitted = two_sided_contour_lines(self.vertices, self.faces, *sides, spacing,
+                                                 smooth)
+                if not self.fill_holes:
+                    return fitted
+                # where the component is no band, eq. 9's iso-lines of the boundary
+                # distance fill the holes the fitted lines leave
+                hole = np.flatnonzero(self.line_gap(fitted) > UNCOVERED * spacing)
+                if hole.size == 0:
+                    return fitted
+                from slicer.toolpath.lines import merge_lines
+
+                extra = contour_lines(self.vertices, self.faces[hole], self.distance, spacing,
+                                      0.5 * spacing)
+                return merge_lines([fitted, extra], [np.arange(len(self.faces)), hole])
             offset = min(0.5 * spacing, 0.5 * self.max_distance)
             return contour_lines(self.vertices, self.faces, self.distance, spacing, offset)
         from slicer.toolpath.stripes import poisson_stripe_lines, stripe_lines
@@ -411,15 +482,29 @@ class _Surface:
 
 
 def _measure(lines: SurfaceLines, width_pt: NDArray[np.float64],
-             normals_pt: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(k,) float64, |spacing - W| / W at the line points with a measured spacing."""
-    from slicer.toolpath.width_error import line_spacing
+             normals_pt: NDArray[np.float64],
+             boundary: Callable[[], tuple[NDArray[np.float64], NDArray[np.float64]]]
+             ) -> tuple[NDArray[np.float64], int]:
+    """(k,) float64, |spacing - W| / W at the line points with a measured spacing, and how
+    many of them are lone (no other line within LONE_LINE x W).
+
+    A lone line fills a band about one width wide by itself (a thin wall, a tube's shell):
+    its nearest other line lies across the part, not beside it, so its spacing is the
+    band's width there: the distances to the boundary on its two sides (Euclidean: exact
+    on flat layers, and a band that thin is nearly flat across). ``boundary`` gives the
+    (B, 3) mm ends a, b of the original layer's boundary segments (called when needed).
+    """
+    from slicer.toolpath.width_error import band_width, line_spacing
 
     if len(lines.points) < 2:
-        return np.zeros(0)
+        return np.zeros(0), 0
     spacing = line_spacing(lines.points, lines.line, normals_pt, closed=lines.closed)
+    lone = ~np.isfinite(spacing) | (spacing > LONE_LINE * width_pt)
+    if lone.any():
+        spacing[lone] = band_width(lines.points[lone], *boundary())
     ok = np.isfinite(spacing) & (width_pt > 0)
-    return np.abs(spacing[ok] - width_pt[ok]) / width_pt[ok]
+    err = np.abs(spacing[ok] - width_pt[ok]) / width_pt[ok]
+    return err, int(np.count_nonzero(lone & ok))
 
 
 @dataclass(frozen=True, eq=False)
@@ -610,39 +695,53 @@ def _component_toolpath_unsafe(
             return match_volume(evaluate, required, cfg.volume_tolerance, tau, 1)
         return match_volume(evaluate, required, cfg.volume_tolerance)
 
+    def fit_flow(built: _Built) -> _Built:
+        """The nozzle speed scaled so the lines deposit the required volume (W = C / (H v)
+        stays true; the filament gets thinner or fatter with it), within
+        CENTRE_WIDTH_SCALE and the profile's speed table."""
+        wp = built.waypoints
+        volume = float(wp.deposited().sum())
+        if volume <= 0 or required <= 0:
+            return built
+        lo, hi = CENTRE_WIDTH_SCALE
+        v_lo, v_hi = (float(x) for x in profile.speed_for_height(
+            np.array(profile.height_range[::-1])))
+        # never beyond the table's speeds, unless the line already was
+        speed = np.clip(wp.speed / np.clip(required / volume, lo, hi),
+                        np.minimum(v_lo, wp.speed), np.maximum(v_hi, wp.speed))
+        width = wp.width * wp.speed / speed
+        return replace(built, waypoints=replace(wp, speed=speed, width=width))
+
     def centre_match(lines: SurfaceLines) -> VolumeMatch[_Built]:
         """One line along a band too narrow (or too wide) for W: its width is scaled to the
-        band by the nozzle speed (W = C / (H v) stays true; the filament gets thinner or
-        fatter with it), within CENTRE_WIDTH_SCALE and the profile's speed table."""
+        band by the nozzle speed (``fit_flow``)."""
         def fixed_lines(t: float) -> tuple[float, _Built]:
-            built = comp.build(lines, None, comp.w_mean, start, lifter, lift)
-            volume = float(built.waypoints.deposited().sum())
-            if volume <= 0 or required <= 0:
-                return volume, built
-            wp = built.waypoints
-            lo, hi = CENTRE_WIDTH_SCALE
-            v_lo, v_hi = (float(x) for x in profile.speed_for_height(
-                np.array(profile.height_range[::-1])))
-            # never beyond the table's speeds, unless the line already was
-            speed = np.clip(wp.speed / np.clip(required / volume, lo, hi),
-                            np.minimum(v_lo, wp.speed), np.maximum(v_hi, wp.speed))
-            width = wp.width * wp.speed / speed
-            built = replace(built, waypoints=replace(wp, speed=speed, width=width))
+            built = fit_flow(comp.build(lines, None, comp.w_mean, start, lifter, lift))
             return float(built.waypoints.deposited().sum()), built
 
         return match_volume(fixed_lines, required, cfg.volume_tolerance, 1.0, 1)
 
     used = pattern
     fallback = ""
+    if (pattern == PATTERN_STRIPE
+            and surf.narrow_share(0.5 * NARROW_STRIPES * comp.w_mean) >= NARROW_SHARE):
+        # stripes across a band this narrow are shorter than W once their ends are cut back
+        # by W / 2: a zig-zag of stubs and connectors. A component that is mostly such a
+        # band (a thin wall, a tube's shell, with or without a wider spot) is printed as on
+        # a contour layer; there is no across-the-band direction to stagger anyway.
+        used, fallback = PATTERN_CONTOUR, "contour"
     # contours with fit_bands: a band narrower than 1.5 W everywhere holds round(b / W) = 1
     # line; the harmonic centre line is that line, and smoother than the medial iso-line of
     # two distance fields on a band a triangle or two wide
-    thin = 0.5 * THIN_BAND_FIT if cfg.fit_bands and pattern == PATTERN_CONTOUR else THIN_BAND
+    thin = 0.5 * THIN_BAND_FIT if cfg.fit_bands and used == PATTERN_CONTOUR else THIN_BAND
     centre = surf.centre_lines() if surf.max_distance < thin * comp.w_mean else None
     if centre is not None and centre.n_lines:
         # A band with holes at most about one width wide holds one line: along its middle.
         match, used, fallback = centre_match(centre), PATTERN_CONTOUR, "centre-line"
     else:
+        if used == PATTERN_CONTOUR and not surf.band_fit_covers(comp.w_mean):
+            surf.fill_holes = True
+            fallback = fallback or "holes-filled"
         match = run(surf, used)
         if abs(match.rel_error) > SHORT_JOIN_ABOVE and cfg.join_factor > SHORT_JOIN:
             # Longer extruding joins make V(tau) jumpy (a join that flips adds or removes
@@ -652,38 +751,54 @@ def _component_toolpath_unsafe(
             short = run(surf, used, join=SHORT_JOIN)
             if abs(short.rel_error) < abs(match.rel_error):
                 match = short
-    if abs(match.rel_error) > THIN_SHORTFALL and not fallback:
+    if abs(match.rel_error) > THIN_SHORTFALL and fallback != "centre-line":
         # A band about one width wide: stripes across it vanish once their ends are cut
         # back by W / 2, contours come out as a doubled loop. Try the other pattern and a
         # single line along the middle (bands with holes); keep the closest volume.
-        options = [(match, used, "")]
+        options = [(match, used, fallback)]
         if used == PATTERN_STRIPE:
             options.append((run(surf, PATTERN_CONTOUR), PATTERN_CONTOUR, "contour"))
         centre = surf.centre_lines() if centre is None else centre
         if centre.n_lines:
             options.append((centre_match(centre), PATTERN_CONTOUR, "centre-line"))
         match, used, fallback = min(options, key=lambda o: abs(o[0].rel_error))
+    if abs(match.rel_error) > FLOW_FIT_ABOVE and fallback != "centre-line":
+        # The line count is discrete (a band of 1.7 W holds 2 lines, not 1.7): where no
+        # spacing matches the volume, the flow per length does.
+        fitted = fit_flow(match.result)
+        volume = float(fitted.waypoints.deposited().sum())
+        match = replace(match, volume=volume, rel_error=volume / required - 1.0,
+                        status=f"{match.status}+flow", result=fitted)
     timings["lines"] = time.perf_counter() - t0
     built = match.result
 
     t0 = time.perf_counter()
-    err = _measure(built.lines, comp.values_at(built.lines.face, built.lines.bary)[2],
-                   comp.normals[built.lines.face])
+    def boundary() -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        from slicer.toolpath.surface import boundary_edges
+
+        edges = boundary_edges(comp.faces)
+        return comp.vertices[edges[:, 0]], comp.vertices[edges[:, 1]]
+
+    def measure(lines: SurfaceLines) -> tuple[NDArray[np.float64], int]:
+        return _measure(lines, comp.values_at(lines.face, lines.bary)[2],
+                        comp.normals[lines.face], boundary)
+
+    err, lone = measure(built.lines)
     err_undeformed = np.zeros(0)
     err_poisson = np.zeros(0)
     if measure_baselines:
         if deformed is comp.vertices or fallback == "centre-line":
             b = built  # no deformation (or one line): the direct lines are the lines
         else:
-            b = run(_Surface(comp.vertices, comp.faces, cfg.fit_bands, perimeter,
-                             cfg.boundary_distance), used,
-                    match.tau).result
-        err_undeformed = _measure(b.lines, comp.values_at(b.lines.face, b.lines.bary)[2],
-                                  comp.normals[b.lines.face])
+            direct = _Surface(comp.vertices, comp.faces, cfg.fit_bands, perimeter,
+                              cfg.boundary_distance)
+            if used == PATTERN_CONTOUR and not direct.band_fit_covers(comp.w_mean):
+                direct.fill_holes = True
+            b = run(direct, used, match.tau).result
+        err_undeformed = measure(b.lines)[0]
         if used == PATTERN_STRIPE:
             pb = run(surf, used, match.tau, poisson=True).result
-            err_poisson = _measure(pb.lines, comp.values_at(pb.lines.face, pb.lines.bary)[2],
-                                   comp.normals[pb.lines.face])
+            err_poisson = measure(pb.lines)[0]
     timings["baselines"] = time.perf_counter() - t0
     wp = replace(built.waypoints, pattern=np.full(len(built.waypoints.path), used, np.int8))
     return ComponentResult(
@@ -699,6 +814,7 @@ def _component_toolpath_unsafe(
         extrusion_starts=built.linked.extrusion_starts,
         connector_mm3=float(wp.deposited()[built.linked.connector_segments()].sum()),
         width_error=err,
+        width_lone_points=lone,
         width_error_undeformed=err_undeformed,
         width_error_poisson=err_poisson,
         timings=timings,
@@ -964,12 +1080,12 @@ def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile)
         "width_error": {k: _pct(v["deformed"]) for k, v in errors.items()},
         "width_error_undeformed": {k: _pct(v["undeformed"]) for k, v in errors.items()},
         "width_error_poisson_stripe": _pct(errors["stripe"]["poisson"]),
-        # diagnostic, not a replacement of width_error: share of points whose nearest other
-        # line is more than 2 W away (a lone line in a band about one width wide measures
-        # its spacing across the part), per pattern
+        # share of the measured points on lone lines (no other line within LONE_LINE x W:
+        # a line filling a band about one width wide), measured by their band's width
         "width_error_no_neighbour_fraction": {
-            k: float(np.mean(v["deformed"] > 1.0)) if v["deformed"].size else 0.0
-            for k, v in errors.items()},
+            name: (sum(c.width_lone_points for c in comps if c.pattern == code)
+                   / errors[name]["deformed"].size if errors[name]["deformed"].size else 0.0)
+            for code, name in PATTERN_NAMES.items()},
         "extrusion_starts": {
             "total": int(sum(starts)),
             "components": len(comps),
@@ -990,6 +1106,8 @@ def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile)
         "volume_match_status": statuses,
         "thin_fallback": {kind: sum(c.fallback == kind for c in comps)
                           for kind in ("contour", "centre-line")},
+        # contour components that are no band (fitted lines left holes, eq. 9 lines fill them)
+        "band_fit_holes_filled": sum(c.fallback == "holes-filled" for c in comps),
         "deformation_status": deform,
         "height_out_of_profile_fraction": out_of_range / n_vert if n_vert else 0.0,
         "profile": {"name": profile.name, "rate_mm3_s": profile.rate_mm3_s,

@@ -191,40 +191,64 @@ def segment_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
                      edges: NDArray[np.integer]) -> NDArray[np.float64]:
     """(n,) float64, mm, Euclidean distance of each vertex to the nearest of ``edges``.
 
-    edges: (B, 2) vertex ids of segments (e.g. boundary edges). They are cut into pieces of
-    at most SUBSEGMENTS x their median length; each vertex checks the NEAREST_PIECES pieces
-    with the nearest midpoints exactly. Vertices not used by a face get 0; without edges
-    every vertex gets inf.
+    edges: (B, 2) vertex ids of segments (e.g. boundary edges); see ``points_to_segments``.
+    Vertices not used by a face get 0; without edges every vertex gets inf.
     """
     v = np.asarray(vertices, dtype=np.float64)
     e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
     out = np.zeros(len(v))
     used = np.unique(np.asarray(faces, dtype=np.int64))
-    if len(e) == 0:
-        out[used] = np.inf
-        return out
-    a, b = v[e[:, 0]], v[e[:, 1]]
+    out[used] = points_to_segments(v[used], v[e[:, 0]], v[e[:, 1]])
+    return out
+
+
+def points_to_segments(points: NDArray[np.float64], a: NDArray[np.float64],
+                       b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(P,) float64, mm, Euclidean distance of each point to the nearest segment a-b.
+
+    points: (P, 3) mm; a, b: (B, 3) mm segment ends. The segments are cut into pieces of at
+    most SUBSEGMENTS x their median length; each point checks the NEAREST_PIECES pieces with
+    the nearest midpoints exactly. Without segments every point gets inf.
+    """
+    x = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if len(a) == 0:
+        return np.full(len(x), np.inf)
+    pa, pb = split_segments(a, b)
+    dist, _ = nearest_feet(x, pa, pb, NEAREST_PIECES)
+    out: NDArray[np.float64] = dist.min(axis=1)
+    return out
+
+
+def split_segments(a: NDArray[np.float64], b: NDArray[np.float64]
+                   ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Segments a-b ((B, 3) mm) cut into pieces of at most SUBSEGMENTS x their median
+    length: (S, 3), (S, 3) mm piece ends, so that the nearest midpoints find the nearest
+    pieces."""
     length = np.linalg.norm(b - a, axis=1)
     piece = SUBSEGMENTS * max(float(np.median(length)), tol.zero)
     cuts = np.maximum(np.ceil(length / piece).astype(np.int64), 1)
-    owner = np.repeat(np.arange(len(e)), cuts)
+    owner = np.repeat(np.arange(len(a)), cuts)
     k = np.arange(len(owner)) - np.repeat(np.cumsum(cuts) - cuts, cuts)
     t0, t1 = k / cuts[owner], (k + 1) / cuts[owner]
     d = (b - a)[owner]
-    pa = a[owner] + t0[:, None] * d
-    pb = a[owner] + t1[:, None] * d
+    return a[owner] + t0[:, None] * d, a[owner] + t1[:, None] * d
+
+
+def nearest_feet(points: NDArray[np.float64], pa: NDArray[np.float64],
+                 pb: NDArray[np.float64], k: int
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Distances (P, k) mm and feet (P, k, 3) mm from each point to the k pieces pa-pb with
+    the nearest midpoints (fewer columns when there are fewer pieces)."""
     tree = cKDTree(0.5 * (pa + pb))
-    kk = min(NEAREST_PIECES, len(pa))
-    x = v[used]
-    _, near = tree.query(x, k=kk)
-    near = near.reshape(len(x), kk)
-    sa, sb = pa[near], pb[near]  # (u, kk, 3)
+    kk = min(k, len(pa))
+    _, near = tree.query(points, k=kk)
+    near = near.reshape(len(points), kk)
+    sa, sb = pa[near], pb[near]  # (P, kk, 3)
     ab = sb - sa
-    t = np.einsum("ukj,ukj->uk", x[:, None, :] - sa, ab) / np.maximum(
+    t = np.einsum("ukj,ukj->uk", points[:, None, :] - sa, ab) / np.maximum(
         np.einsum("ukj,ukj->uk", ab, ab), tol.zero)
     foot = sa + np.clip(t, 0.0, 1.0)[..., None] * ab
-    out[used] = np.linalg.norm(x[:, None, :] - foot, axis=2).min(axis=1)
-    return out
+    return np.linalg.norm(points[:, None, :] - foot, axis=2), foot
 
 
 def planar_boundary_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer]

@@ -11,6 +11,8 @@ from scipy.spatial import cKDTree
 from slicer.errors import InputError
 from slicer.tolerance import tol
 
+BAND_PIECES = 64  # boundary pieces searched for both sides of a band (band_width)
+
 
 class WidthError(NamedTuple):
     """Percentiles of the relative width error |spacing - W| / W (dimensionless)."""
@@ -111,6 +113,32 @@ def line_spacing(points: NDArray[np.float64], line: NDArray[np.integer],
         d0 = d0 - np.einsum("ij,ij->i", d0, normals)[:, None] * normals
         best = np.minimum(best, np.linalg.norm(d0, axis=1))
     out[has] = best[has]
+    return out
+
+
+def band_width(points: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64],
+               k: int = BAND_PIECES) -> NDArray[np.float64]:
+    """(P,) float64 mm, width of the band through each point: its distance to the nearest
+    boundary segment plus that to the nearest one on the other side (the feet in opposite
+    half-spaces), NaN where the other side is not among the k nearest pieces.
+
+    points: (P, 3) mm, e.g. a lone line filling a thin band; a, b: (B, 3) mm ends of the
+    band's boundary segments.
+    """
+    from slicer.toolpath.eikonal import nearest_feet, split_segments
+
+    x = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    out = np.full(len(x), np.nan)
+    if len(x) == 0 or len(a) == 0:
+        return out
+    dist, foot = nearest_feet(x, *split_segments(a, b), k)
+    first = np.argmin(dist, axis=1)
+    rows = np.arange(len(x))
+    toward = foot[rows, first] - x  # (P, 3) towards the nearest boundary
+    side = np.einsum("pkj,pj->pk", foot - x[:, None, :], toward)
+    other = np.where(side < 0.0, dist, np.inf).min(axis=1)
+    ok = np.isfinite(other)
+    out[ok] = dist[rows, first][ok] + other[ok]
     return out
 
 

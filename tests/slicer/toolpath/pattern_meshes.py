@@ -1,4 +1,5 @@
-"""Tiny layer meshes for the toolpath pattern tests: discs and annuli, flat or lifted."""
+"""Tiny layer meshes for the toolpath pattern tests: discs, annuli and a plate with two
+holes, flat or lifted."""
 
 from __future__ import annotations
 
@@ -33,10 +34,16 @@ def disc(radius: float, h: float, inner: float = 0.0, jitter: float = 0.0, seed:
     cen = p[tri].mean(axis=1)
     keep = np.linalg.norm(cen, axis=1) > inner
     tri = tri[keep]
+    return flat_mesh(p, tri)
+
+
+def flat_mesh(p: NDArray[np.float64], tri: NDArray[np.integer]
+              ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
+    """The triangles ``tri`` of the 2-D points ``p`` as a mesh in z = 0: unused points
+    dropped, faces counter-clockwise (normal +z)."""
     used, inv = np.unique(tri, return_inverse=True)
     v = np.column_stack([p[used], np.zeros(len(used))])
     f = inv.reshape(-1, 3).astype(np.int32)
-    # counter-clockwise faces, normal +z
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     flip = np.cross(b - a, c - a)[:, 2] < 0
     f[flip] = f[flip][:, [0, 2, 1]]
@@ -76,3 +83,31 @@ def sliver_disc(radius: float, h: float, squeeze: float = 0.97
     bad = np.cross(b - a, c - a)[:, 2] <= 0
     out[f[bad].ravel()] = v[f[bad].ravel()]
     return out, f
+
+
+def plate_with_holes(width: float = 44.0, height: float = 20.0, radius: float = 8.0,
+                     centre_x: float = 11.0, h: float = 0.6
+                     ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
+    """Flat rectangle width x height (mm, centred at the origin) with two round holes of
+    ``radius`` at x = +-centre_x: thin bands above and below the holes, and a solid
+    junction between them that is no band. Edge length about h; faces normal +z."""
+    rng = np.random.default_rng(0)
+    xs = np.arange(-width / 2, width / 2 + 1e-9, h)
+    ys = np.arange(-height / 2, height / 2 + 1e-9, h)
+    gx, gy = np.meshgrid(xs, ys)
+    p = np.column_stack([gx.ravel(), gy.ravel()])
+    inner = (np.abs(p[:, 0]) < width / 2 - 1e-6) & (np.abs(p[:, 1]) < height / 2 - 1e-6)
+    p = p + 0.1 * h * rng.uniform(-1, 1, p.shape) * inner[:, None]
+    keep = np.ones(len(p), dtype=bool)
+    rings = []
+    for cx in (-centre_x, centre_x):
+        keep &= np.hypot(p[:, 0] - cx, p[:, 1]) > radius + 0.3 * h
+        a = np.linspace(0, 2 * np.pi, int(2 * np.pi * radius / h), endpoint=False)
+        rings.append(np.column_stack([cx + radius * np.cos(a), radius * np.sin(a)]))
+    p = np.concatenate([p[keep], *rings])
+    tri = Delaunay(p).simplices
+    centre = p[tri].mean(axis=1)
+    solid = np.ones(len(tri), dtype=bool)
+    for cx in (-centre_x, centre_x):
+        solid &= np.hypot(centre[:, 0] - cx, centre[:, 1]) > radius
+    return flat_mesh(p, tri[solid])

@@ -13,7 +13,7 @@ from slicer.config import JobConfig
 from slicer.extrusion import load_profile
 from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Layers
 from slicer.toolpath.build import ToolpathResult, compute_toolpath, layer_pattern
-from tests.slicer.toolpath.pattern_meshes import sliver_disc
+from tests.slicer.toolpath.pattern_meshes import flat_mesh, plate_with_holes, sliver_disc
 
 PROFILE = load_profile("ecoflex-0030")
 
@@ -33,13 +33,21 @@ def disc_mesh(radius: float, h: float, inner: float = 0.0) -> tuple[
     tri = Delaunay(p).simplices
     if inner > 0:
         tri = tri[np.linalg.norm(p[tri].mean(axis=1), axis=1) > inner]
-    used, inv = np.unique(tri, return_inverse=True)
-    v = np.column_stack([p[used], np.zeros(len(used))])
-    f = inv.reshape(-1, 3).astype(np.int32)
-    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
-    flip = np.cross(b - a, c - a)[:, 2] < 0
-    f[flip] = f[flip][:, [0, 2, 1]]
-    return v, f
+    return flat_mesh(p, tri)
+
+
+def flat_layer(v: NDArray[np.float64], f: NDArray[np.int32], height: float) -> Layers:
+    """One flat layer (layer 0) of constant height H (mm), normals +z."""
+    return Layers(v, f, np.zeros(len(f), np.int32), np.full(len(v), height),
+                  np.tile([0.0, 0.0, 1.0], (len(v), 1)))
+
+
+def stripe_layer_toolpath(v: NDArray[np.float64], f: NDArray[np.int32], height: float
+                          ) -> ToolpathResult:
+    """The toolpath of one flat layer printed as a stripe layer (no baselines)."""
+    cfg = JobConfig().with_overrides(toolpath={"first_pattern": "stripe"})
+    return compute_toolpath(flat_layer(v, f, height), cfg, PROFILE, measure_baselines=False,
+                            workers=1)
 
 
 def disc_stack(n_layers: int, radius: float = 12.0, h: float = 1.0, base_h: float = 0.6,
@@ -297,8 +305,7 @@ def test_narrow_band_stripes_get_no_perimeter_loop() -> None:
     mm at H = 0.6 mm), two loops and clipped stubs would be mostly connectors, so the stripe
     layer is the same with and without the option."""
     v, f = disc_mesh(20.0, 0.6, inner=10.0)
-    layers = Layers(v, f, np.zeros(len(f), np.int32), np.full(len(v), 0.6),
-                    np.tile([0.0, 0.0, 1.0], (len(v), 1)))
+    layers = flat_layer(v, f, 0.6)
     runs = [compute_toolpath(layers, JobConfig().with_overrides(
         toolpath={"first_pattern": "stripe", "stripe_perimeter": on}), PROFILE,
         measure_baselines=False, workers=1).toolpath for on in (False, True)]
@@ -309,15 +316,11 @@ def test_narrow_band_stripes_get_no_perimeter_loop() -> None:
 def test_thin_band_gets_a_centre_line() -> None:
     """An annulus about one width wide (W = 4.5 mm at H = 1 mm) cannot take stripes (they
     vanish when cut back by W / 2) nor spaced contours: one loop along its middle."""
-    v, f = disc_mesh(14.0, 0.5, inner=10.0)
-    layers = Layers(v, f, np.zeros(len(f), np.int32), np.full(len(v), 1.0),
-                    np.tile([0.0, 0.0, 1.0], (len(v), 1)))
-    cfg = JobConfig().with_overrides(toolpath={"first_pattern": "stripe"})
-    res = compute_toolpath(layers, cfg, PROFILE, measure_baselines=False, workers=1)
+    res = stripe_layer_toolpath(*disc_mesh(14.0, 0.5, inner=10.0), 1.0)
     assert res.report["thin_fallback"]["centre-line"] == 1
     tp = res.toolpath
     r = np.linalg.norm(tp.position[tp.extrude, :2], axis=1)
-    assert np.allclose(r, 12.0, atol=0.3)
+    assert np.allclose(r, 12.0, atol=0.05)  # the middle (harmonic 1/2: 11.83, geometric mean)
     assert np.all(tp.pattern == PATTERN_CONTOUR)
     assert res.report["extrusion_starts"]["total"] == 1
     # volume: the 4.5 mm line is narrowed to the 4 mm band by a faster nozzle (W = C / (H v)
@@ -327,6 +330,55 @@ def test_thin_band_gets_a_centre_line() -> None:
     assert np.allclose(tp.width[ext], 4.0, rtol=0.03)
     assert np.allclose(tp.width * tp.height * tp.speed, PROFILE.rate_mm3_s)
     assert np.all(tp.speed[ext] > PROFILE.speed_at(tp.height[ext]))
+    # width error of a lone line: its band (4 mm) against W (4.5 mm), not the distance
+    # across the hole to the far side of its own loop
+    w = float(PROFILE.rate_mm3_s / PROFILE.speed_at(np.array([1.0]))[0])
+    err = res.report["width_error"]["contour"]
+    assert err["p50"] == pytest.approx(abs(4.0 - w) / w, abs=0.02)
+    assert err["p95"] < abs(4.0 - w) / w + 0.04
+    assert res.report["width_error_no_neighbour_fraction"]["contour"] == 1.0
+
+
+def test_narrow_band_on_a_stripe_layer_gets_contours() -> None:
+    """An annulus 1.7 W wide (W = 4.55 mm at H = 1 mm): stripes across it would be stubs
+    shorter than W, so the stripe layer prints it like a contour layer: two fitted loops
+    with the band's volume; a disc as wide keeps its stripes."""
+    res = stripe_layer_toolpath(*disc_mesh(17.7, 0.5, inner=10.0), 1.0)
+    assert res.report["thin_fallback"]["contour"] == 1
+    tp = res.toolpath
+    assert np.all(tp.pattern == PATTERN_CONTOUR)
+    r = np.linalg.norm(tp.position[tp.extrude, :2], axis=1)
+    assert np.all((r > 10.5) & (r < 17.2))
+    assert np.ptp(r) > 0.6 * 4.55  # two loops across the band
+    # two lines hold 0.85 W each (15-20 % width error by construction); the flow per length,
+    # not the line count, makes up the volume
+    assert abs(res.report["layer_volume_error"]) < 0.01
+    assert res.report["per_layer"][0]["volume_status"][0].endswith("+flow")
+    assert res.report["width_error"]["contour"]["p50"] < 0.25
+    res = stripe_layer_toolpath(*disc_mesh(7.7, 0.5), 1.0)
+    assert np.all(res.toolpath.pattern == PATTERN_STRIPE)
+
+
+def test_band_fitting_holes_are_filled_where_the_layer_is_no_band() -> None:
+    """A plate with two holes: thin bands around the holes and a solid junction between
+    them. Contours fitted to the band (outer loop against the holes) miss part of the
+    junction; the holes get eq. 9's iso-lines, so no area is left farther than 0.8
+    spacings from a line, and the component still gets its volume."""
+    from slicer.toolpath.build import UNCOVERED, _Surface
+
+    v, f = plate_with_holes()
+    surf = _Surface(v, f)
+    w = 2.33
+    assert not surf.band_fit_covers(w)
+    surf.fill_holes = True
+    gap = surf.line_gap(surf.lines(PATTERN_CONTOUR, w))
+    assert surf.face_area[gap > UNCOVERED * w].sum() < 0.02 * surf.face_area.sum()
+    annulus = _Surface(*disc_mesh(20.0, 0.6, inner=10.0))
+    assert annulus.band_fit_covers(w)  # a band: nothing to fill
+    layers = flat_layer(v, f, 0.6)
+    res = compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False, workers=1)
+    assert res.report["band_fit_holes_filled"] == 1
+    assert abs(res.report["layer_volume_error"]) < 0.01
 
 
 def test_variable_height_on_a_curved_layer_is_deformed() -> None:

@@ -78,3 +78,24 @@ def test_densely_sampled_lines_still_find_their_neighbour() -> None:
     pts, line = _parallel(3, 1.0, n_pts=1001)
     s = width_error.line_spacing(pts, line, k=24)
     assert np.allclose(s, 1.0)
+
+
+def test_band_width_is_the_sum_of_both_sides() -> None:
+    """A 3 mm strip between y = 0 and y = 3 (boundary cut in 0.5 mm segments): the band
+    through a point is 3 mm wherever the point sits across it; an annulus 10-14 mm gives
+    4 mm (to the polygon's chord error) from a point off its middle."""
+    x = np.arange(0.0, 30.0, 0.5)
+    lower = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+    upper = lower + np.array([0.0, 3.0, 0.0])
+    a = np.concatenate([lower[:-1], upper[:-1]])
+    b = np.concatenate([lower[1:], upper[1:]])
+    pts = np.array([[10.0, 1.0, 0.0], [15.2, 2.5, 0.0], [20.0, 1.5, 0.0]])
+    assert np.allclose(width_error.band_width(pts, a, b), 3.0, atol=1e-9)
+    t = np.linspace(0.0, 2.0 * np.pi, 200, endpoint=False)
+    ring = [r * np.column_stack([np.cos(t), np.sin(t), np.zeros_like(t)]) for r in (10.0, 14.0)]
+    a = np.concatenate(ring)
+    b = np.concatenate([np.roll(r, -1, axis=0) for r in ring])
+    off_middle = 11.2 * np.column_stack([np.cos(t[::7]), np.sin(t[::7]), np.zeros_like(t[::7])])
+    assert np.allclose(width_error.band_width(off_middle, a, b), 4.0, atol=0.01)
+    # no second side: NaN
+    assert np.isnan(width_error.band_width(pts[:1], lower[:-1], lower[1:])).all()
