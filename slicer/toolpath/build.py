@@ -306,6 +306,7 @@ class _Surface:
         self._sides: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
         self._smoother: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
         self._face_area: NDArray[np.float64] | None = None
+        self._fitted: tuple[float, SurfaceLines] | None = None
         # fitted contours leave holes here (band_fit_covers): eq. 9 lines fill them
         self.fill_holes = False
 
@@ -328,22 +329,40 @@ class _Surface:
                            distance_from(self.vertices, self.faces, inner, backend=self.backend))
         return self._sides
 
-    def narrow_share(self, half_width: float) -> float:
-        """Share of the area where the band is narrower than 2 x half_width: farther than
-        half_width from every point at least half_width from the boundary."""
+    def mostly_narrow(self, half_width: float, share: float) -> bool:
+        """Whether the band is narrower than 2 x half_width on at least ``share`` of the
+        area: farther than half_width from every point at least half_width from the
+        boundary."""
         if len(self.faces) == 0:
-            return 0.0
+            return False
+        total = max(float(self.face_area.sum()), tol.zero)
+        near = self.distance[self.faces].mean(axis=1) < half_width
+        if float(self.face_area[near].sum()) < share * total:
+            return False  # narrow areas lie within half_width of the boundary: too few
         wide = np.flatnonzero(self.distance >= half_width)
         if len(wide) == 0:
-            return 1.0
+            return True
         from slicer.toolpath.geodesic import distance_from
 
         reach = distance_from(self.vertices, self.faces, wide, backend=self.backend)
-        area = 0.5 * np.linalg.norm(np.cross(
-            self.vertices[self.faces[:, 1]] - self.vertices[self.faces[:, 0]],
-            self.vertices[self.faces[:, 2]] - self.vertices[self.faces[:, 0]]), axis=1)
         narrow = reach[self.faces].mean(axis=1) > half_width
-        return float(area[narrow].sum() / max(area.sum(), tol.zero))
+        return float(self.face_area[narrow].sum()) >= share * total
+
+    def fitted_contours(self, spacing: float) -> SurfaceLines:
+        """Contours fitted to the band (``contours.two_sided_contour_lines``) at ``spacing``;
+        the last ones are kept, since the coverage check and the volume match's first trial
+        ask for the same spacing."""
+        if self._fitted is not None and self._fitted[0] == spacing:
+            return self._fitted[1]
+        from slicer.toolpath.contours import two_sided_contour_lines
+
+        sides = self.sides()
+        if sides is None:
+            raise ValueError("fitted contours need a band (two or more boundary loops)")
+        smooth = self.smoother(PITCH_SMOOTHING * spacing) if PITCH_SMOOTHING > 0 else None
+        lines = two_sided_contour_lines(self.vertices, self.faces, *sides, spacing, smooth)
+        self._fitted = (spacing, lines)
+        return lines
 
     def line_gap(self, lines: SurfaceLines) -> NDArray[np.float64]:
         """(m,) float64, distance (surface units) from each face centre to the nearest
@@ -368,11 +387,7 @@ class _Surface:
         sides = self.sides() if self.fit_bands else None
         if sides is None:
             return True
-        from slicer.toolpath.contours import two_sided_contour_lines
-
-        smooth = self.smoother(PITCH_SMOOTHING * spacing) if PITCH_SMOOTHING > 0 else None
-        lines = two_sided_contour_lines(self.vertices, self.faces, *sides, spacing, smooth)
-        hole = self.line_gap(lines) > UNCOVERED * spacing
+        hole = self.line_gap(self.fitted_contours(spacing)) > UNCOVERED * spacing
         return float(self.face_area[hole].sum()) <= UNCOVERED_SHARE * self.face_area.sum()
 
     @property
@@ -444,11 +459,7 @@ class _Surface:
 
             sides = self.sides() if self.fit_bands else None
             if sides is not None:
-                from slicer.toolpath.contours import two_sided_contour_lines
-
-                smooth = self.smoother(PITCH_SMOOTHING * spacing) if PITCH_SMOOTHING > 0 else None
-                fitted = two_sided_contour_lines(self.vertices, self.faces, *sides, spacing,
-                                                 smooth)
+                fitted = self.fitted_contours(spacing)
                 if not self.fill_holes:
                     return fitted
                 # where the component is no band, eq. 9's iso-lines of the boundary
@@ -724,7 +735,7 @@ def _component_toolpath_unsafe(
     used = pattern
     fallback = ""
     if (pattern == PATTERN_STRIPE
-            and surf.narrow_share(0.5 * NARROW_STRIPES * comp.w_mean) >= NARROW_SHARE):
+            and surf.mostly_narrow(0.5 * NARROW_STRIPES * comp.w_mean, NARROW_SHARE)):
         # stripes across a band this narrow are shorter than W once their ends are cut back
         # by W / 2: a zig-zag of stubs and connectors. A component that is mostly such a
         # band (a thin wall, a tube's shell, with or without a wider spot) is printed as on
