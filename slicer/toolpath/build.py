@@ -371,10 +371,9 @@ class _Surface:
 
         p = lines.points
         seg = np.flatnonzero(lines.line[1:] == lines.line[:-1])
-        centre = self.vertices[self.faces].mean(axis=1)
         if len(seg) == 0:
             return np.full(len(self.faces), np.inf)
-        return points_to_segments(centre, p[seg], p[seg + 1])
+        return points_to_segments(self.vertices[self.faces].mean(axis=1), p[seg], p[seg + 1])
 
     def band_fit_covers(self, spacing: float) -> bool:
         """Whether contours fitted to the band at ``spacing`` leave no hole: at most
@@ -390,13 +389,20 @@ class _Surface:
         hole = self.line_gap(self.fitted_contours(spacing)) > UNCOVERED * spacing
         return float(self.face_area[hole].sum()) <= UNCOVERED_SHARE * self.face_area.sum()
 
+    def fill_band_fit_holes(self, spacing: float) -> bool:
+        """Contours of a component that is no band (``band_fit_covers`` fails at
+        ``spacing``) get eq. 9's iso-lines where the fitted ones leave holes; whether so."""
+        if not self.band_fit_covers(spacing):
+            self.fill_holes = True
+        return self.fill_holes
+
     @property
     def face_area(self) -> NDArray[np.float64]:
         """(m,) float64, face areas (surface units^2)."""
         if self._face_area is None:
-            v, f = self.vertices, self.faces
-            self._face_area = 0.5 * np.linalg.norm(
-                np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+            from slicer.toolpath.surface import face_normals
+
+            self._face_area = face_normals(self.vertices, self.faces)[1]
         return self._face_area
 
     def contour_level(self) -> NDArray[np.float64]:
@@ -742,16 +748,14 @@ def _component_toolpath_unsafe(
         # a contour layer; there is no across-the-band direction to stagger anyway.
         used, fallback = PATTERN_CONTOUR, "contour"
     # contours with fit_bands: a band narrower than 1.5 W everywhere holds round(b / W) = 1
-    # line; the harmonic centre line is that line, and smoother than the medial iso-line of
-    # two distance fields on a band a triangle or two wide
+    # line, the centre line, whose width is then fitted to the band (centre_match)
     thin = 0.5 * THIN_BAND_FIT if cfg.fit_bands and used == PATTERN_CONTOUR else THIN_BAND
     centre = surf.centre_lines() if surf.max_distance < thin * comp.w_mean else None
     if centre is not None and centre.n_lines:
         # A band with holes at most about one width wide holds one line: along its middle.
         match, used, fallback = centre_match(centre), PATTERN_CONTOUR, "centre-line"
     else:
-        if used == PATTERN_CONTOUR and not surf.band_fit_covers(comp.w_mean):
-            surf.fill_holes = True
+        if used == PATTERN_CONTOUR and surf.fill_band_fit_holes(comp.w_mean):
             fallback = fallback or "holes-filled"
         match = run(surf, used)
         if abs(match.rel_error) > SHORT_JOIN_ABOVE and cfg.join_factor > SHORT_JOIN:
@@ -803,8 +807,8 @@ def _component_toolpath_unsafe(
         else:
             direct = _Surface(comp.vertices, comp.faces, cfg.fit_bands, perimeter,
                               cfg.boundary_distance)
-            if used == PATTERN_CONTOUR and not direct.band_fit_covers(comp.w_mean):
-                direct.fill_holes = True
+            if used == PATTERN_CONTOUR:
+                direct.fill_band_fit_holes(comp.w_mean)
             b = run(direct, used, match.tau).result
         err_undeformed = measure(b.lines)[0]
         if used == PATTERN_STRIPE:
