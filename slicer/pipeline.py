@@ -174,6 +174,9 @@ def _slice(
         # relative to the target spacing that this leaves (1 everywhere without them)
         "slab_anchors": [float(a) for a in extraction.spacing.anchors],
         "slab_thickness_ratio": _thickness_ratio(extraction.spacing),
+        # remarks for the user: critical selectors that matched nothing or left patches
+        # out, reoriented tets, solver fallbacks (slicer.checks prints them)
+        "notes": list(result.notes),
         "timing_s": dict(result.timings),
     }
     return report, extraction.field, extraction.layers

@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from mesp_cell.console import ConsoleProgress
+from slicer.checks import job_notes
 from slicer.config import JobConfig, load_job
 from slicer.errors import InputError
 
@@ -94,4 +95,6 @@ def run(args: argparse.Namespace) -> int:
         "total_s": report.get("timing_s", {}).get("total"),
     }
     progress.info(f"done: {json.dumps(summary)}; report in {args.out / 'report.json'}")
+    for note in job_notes(report):  # even with --quiet: they may need acting on
+        print(f"note: {note}", flush=True)
     return 0

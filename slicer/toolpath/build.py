@@ -1126,7 +1126,8 @@ def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile)
         "deformation_status": deform,
         "height_out_of_profile_fraction": out_of_range / n_vert if n_vert else 0.0,
         "profile": {"name": profile.name, "rate_mm3_s": profile.rate_mm3_s,
-                    "beta": profile.beta, "calibrated": profile.calibrated},
+                    "beta": profile.beta, "calibrated": profile.calibrated,
+                    "layer_height_range_mm": list(profile.layer_height_range)},
         "speed_mm_s": {"min": float(tp.speed.min()) if len(tp) else 0.0,
                        "max": float(tp.speed.max()) if len(tp) else 0.0},
     }

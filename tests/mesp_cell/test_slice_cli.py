@@ -174,3 +174,15 @@ def test_help_explains_the_command() -> None:
     assert proc.returncode == 0
     for word in ("--layer-height", "--edge-length", "--critical", "--planar", "toolpath.npz"):
         assert word in proc.stdout
+
+
+def test_slicer_notes_reach_the_operator(tmp_path: Path) -> None:
+    """A critical selector whose position condition keeps nothing is not an error (the
+    job still slices), but the operator is told, even with --quiet."""
+    proc = mesp("slice", str(EXAMPLES / "cube.stl"), "--job", str(EXAMPLES / "cube.toml"),
+                "--edge-length", "4", "--critical", "bottom", "--critical", "top@z>100",
+                "--until", "layers", "--quiet", "--out", str(tmp_path / "out"), cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert "note: slicing: critical selector 'top@z>100' kept no patch" in proc.stdout
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert "critical selector 'top@z>100' kept no patch" in report["slicing"]["notes"]

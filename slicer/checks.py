@@ -1,0 +1,49 @@
+"""What an operator should know about a sliced job, read from its ``report.json``.
+
+Each note is one line naming the problem and, where there is one, the fix. ``mesp slice``
+prints them; nothing here stops a job (a bad input raises ``InputError`` earlier).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+# Share of the layer surface with H outside the profile above which the job is flagged.
+HEIGHT_OUT_OF_PROFILE = 0.01
+# |deposited / model volume - 1| above which the job is flagged (issue 3's 2 %).
+VOLUME_ERROR = 0.02
+
+
+def job_notes(report: Mapping[str, Any]) -> list[str]:
+    """One-line notes on a slice report: the model's repairs, the slicer's remarks (critical
+    selectors that matched nothing or left patches out, solver fallbacks), layer heights
+    the extrusion profile cannot print, skipped toolpath components, a volume mismatch."""
+    notes = [f"model: {n}" for n in report.get("model", {}).get("repairs", [])]
+    slicing = report.get("slicing", {})
+    notes += [f"slicing: {n}" for n in slicing.get("notes", [])]
+    toolpath = report.get("toolpath", {})
+    if not toolpath:
+        return notes
+    share = float(toolpath.get("height_out_of_profile_fraction", 0.0))
+    lo_hi = toolpath.get("profile", {}).get("layer_height_range_mm")
+    if share > HEIGHT_OUT_OF_PROFILE and lo_hi:
+        h = slicing.get("height_mm", {})
+        notes.append(
+            f"toolpath: {100 * share:.1f}% of the layer surface has a layer height outside "
+            f"the extrusion profile's {lo_hi[0]:.2f}-{lo_hi[1]:.2f} mm (layers span "
+            f"{h.get('min', float('nan')):.2f}-{h.get('max', float('nan')):.2f} mm): their "
+            "filaments are those of the nearest height it covers and will not fill their "
+            "slab as planned; fix: a layer height or critical surfaces that keep H in "
+            "range (e.g. a position condition such as bottom:30@z<1), or a profile measured "
+            "over a wider range (mesp calibrate)")
+    failed = toolpath.get("failed_components", {})
+    if failed.get("count", 0):
+        reasons = "; ".join(failed.get("reasons", [])[:3])
+        notes.append(f"toolpath: {failed['count']} layer component(s) skipped ({reasons}); "
+                     "fix: a finer tet mesh (--edge-length) usually repairs degenerate layers")
+    error = toolpath.get("volume_error")
+    if error is not None and abs(float(error)) > VOLUME_ERROR:
+        notes.append(f"toolpath: deposited volume is {100 * float(error):+.1f}% off the model's "
+                     "(more than 2%); see toolpath.per_layer in report.json for the layers")
+    return notes
