@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-# Share of the layer surface with H outside the profile above which the job is flagged.
+# Share of the layer vertices with H outside the profile above which the job is flagged.
 HEIGHT_OUT_OF_PROFILE = 0.01
 # |deposited / model volume - 1| above which the job is flagged (issue 3's 2 %).
 VOLUME_ERROR = 0.02
@@ -30,7 +30,7 @@ def job_notes(report: Mapping[str, Any]) -> list[str]:
     if share > HEIGHT_OUT_OF_PROFILE and lo_hi:
         h = slicing.get("height_mm", {})
         notes.append(
-            f"toolpath: {100 * share:.1f}% of the layer surface has a layer height outside "
+            f"toolpath: {100 * share:.1f}% of the layer vertices have a layer height outside "
             f"the extrusion profile's {lo_hi[0]:.2f}-{lo_hi[1]:.2f} mm (layers span "
             f"{h.get('min', float('nan')):.2f}-{h.get('max', float('nan')):.2f} mm): their "
             "filaments are those of the nearest height it covers and will not fill their "
