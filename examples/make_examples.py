@@ -88,7 +88,8 @@ critical = ["bottom:10", "top:10"]
 planar = true
 """,
     "hemisphere": """\
-# Hemisphere, radius 20 mm, flat face down: the demo job (curved layers over a dome).
+# Hemisphere, radius 20 mm, flat face down: the demo job. With the flat bottom critical
+# and a constant layer height the optimal field is g = z: its layers come out planar.
 [mesh]
 edge_length_mm = 2.0
 

@@ -187,7 +187,9 @@ class ComponentResult:
         extrusion_starts: continuous extrusion paths in the component.
         connector_mm3: deposited volume of the connectors that join lines (included in
             deposited_mm3, so the volume match accounts for it).
-        width_error: (k,) float64, |spacing - W| / W at the line points (deformed method).
+        width_error: (k,) float64, |spacing - W| / W at the line points (deformed method),
+            W the width the waypoints print (after ``fit_flow``, if it scaled the speed).
+        width_error_nominal: (k,) float64, the same against the profile's W(H).
         width_lone_points: how many of those are on lone lines, measured by their band.
         width_error_undeformed: (k',) float64, same, lines computed on the original layer.
         width_error_poisson: (k'',) float64, Poisson alternative (stripe layers), else empty.
@@ -213,6 +215,7 @@ class ComponentResult:
     width_error: NDArray[np.float64]
     width_error_undeformed: NDArray[np.float64]
     width_error_poisson: NDArray[np.float64]
+    width_error_nominal: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     width_lone_points: int = 0
     timings: dict[str, float] = field(default_factory=dict)
     error: str = ""
@@ -529,6 +532,7 @@ class _Built:
     lines: SurfaceLines
     linked: LinkedPath
     waypoints: Waypoints
+    flow: float = 1.0  # deposited volume per length over the profile's (fit_flow)
 
 
 class _Component:
@@ -712,6 +716,19 @@ def _component_toolpath_unsafe(
             return match_volume(evaluate, required, cfg.volume_tolerance, tau, 1)
         return match_volume(evaluate, required, cfg.volume_tolerance)
 
+    v_lo, v_hi = (float(x) for x in profile.speed_for_height(
+        np.array(profile.height_range[::-1])))
+
+    def flowed_speed(speed: NDArray[np.float64], flow: float) -> NDArray[np.float64]:
+        """Speed of lines printed at ``flow`` x the profile's volume per length: divided by
+        ``flow``, never beyond the table's speeds unless it already was."""
+        return np.clip(speed / flow, np.minimum(v_lo, speed), np.maximum(v_hi, speed))
+
+    def flowed_width(width: NDArray[np.float64], speed: NDArray[np.float64], flow: float
+                     ) -> NDArray[np.float64]:
+        """W of those lines (W = C / (H v): W x v stays)."""
+        return width if flow == 1.0 else width * speed / flowed_speed(speed, flow)
+
     def fit_flow(built: _Built) -> _Built:
         """The nozzle speed scaled so the lines deposit the required volume (W = C / (H v)
         stays true; the filament gets thinner or fatter with it), within
@@ -720,14 +737,11 @@ def _component_toolpath_unsafe(
         volume = float(wp.deposited().sum())
         if volume <= 0 or required <= 0:
             return built
-        lo, hi = CENTRE_WIDTH_SCALE
-        v_lo, v_hi = (float(x) for x in profile.speed_for_height(
-            np.array(profile.height_range[::-1])))
-        # never beyond the table's speeds, unless the line already was
-        speed = np.clip(wp.speed / np.clip(required / volume, lo, hi),
-                        np.minimum(v_lo, wp.speed), np.maximum(v_hi, wp.speed))
+        flow = float(np.clip(required / volume, *CENTRE_WIDTH_SCALE))
+        speed = flowed_speed(wp.speed, flow)
         width = wp.width * wp.speed / speed
-        return replace(built, waypoints=replace(wp, speed=speed, width=width))
+        return replace(built, waypoints=replace(wp, speed=speed, width=width),
+                       flow=built.flow * flow)
 
     def centre_match(lines: SurfaceLines) -> VolumeMatch[_Built]:
         """One line along a band too narrow (or too wide) for W: its width is scaled to the
@@ -794,11 +808,16 @@ def _component_toolpath_unsafe(
         edges = boundary_edges(comp.faces)
         return comp.vertices[edges[:, 0]], comp.vertices[edges[:, 1]]
 
-    def measure(lines: SurfaceLines) -> tuple[NDArray[np.float64], int]:
-        return _measure(lines, comp.values_at(lines.face, lines.bary)[2],
-                        comp.normals[lines.face], boundary)
+    def measure(lines: SurfaceLines, flow: float = 1.0) -> tuple[NDArray[np.float64], int]:
+        """Width error of ``lines`` against the width they print at ``flow``."""
+        _, v_pt, w_pt = comp.values_at(lines.face, lines.bary)
+        return _measure(lines, flowed_width(w_pt, v_pt, flow), comp.normals[lines.face],
+                        boundary)
 
-    err, lone = measure(built.lines)
+    # against the width the waypoints carry (flow-fitted components print wider or
+    # narrower lines on purpose), and against the profile's W(H) for comparison
+    err, lone = measure(built.lines, built.flow)
+    err_nominal = err if built.flow == 1.0 else measure(built.lines)[0]
     err_undeformed = np.zeros(0)
     err_poisson = np.zeros(0)
     if measure_baselines:
@@ -810,10 +829,11 @@ def _component_toolpath_unsafe(
             if used == PATTERN_CONTOUR:
                 direct.fill_band_fit_holes(comp.w_mean)
             b = run(direct, used, match.tau).result
-        err_undeformed = measure(b.lines)[0]
+        # the baselines' lines would print at the same flow as the component's
+        err_undeformed = measure(b.lines, built.flow)[0]
         if used == PATTERN_STRIPE:
             pb = run(surf, used, match.tau, poisson=True).result
-            err_poisson = measure(pb.lines)[0]
+            err_poisson = measure(pb.lines, built.flow)[0]
     timings["baselines"] = time.perf_counter() - t0
     wp = replace(built.waypoints, pattern=np.full(len(built.waypoints.path), used, np.int8))
     return ComponentResult(
@@ -829,6 +849,7 @@ def _component_toolpath_unsafe(
         extrusion_starts=built.linked.extrusion_starts,
         connector_mm3=float(wp.deposited()[built.linked.connector_segments()].sum()),
         width_error=err,
+        width_error_nominal=err_nominal,
         width_lone_points=lone,
         width_error_undeformed=err_undeformed,
         width_error_poisson=err_poisson,
@@ -1055,6 +1076,8 @@ def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile)
         sel = [c for c in comps if c.pattern == code]
         errors[name] = {
             "deformed": np.concatenate([c.width_error for c in sel]) if sel else np.zeros(0),
+            "nominal": (np.concatenate([c.width_error_nominal for c in sel])
+                        if sel else np.zeros(0)),
             "undeformed": (np.concatenate([c.width_error_undeformed for c in sel])
                            if sel else np.zeros(0)),
             "poisson": (np.concatenate([c.width_error_poisson for c in sel])
@@ -1093,6 +1116,9 @@ def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile)
         "layer_volume_error": deposited / required - 1.0 if required > 0 else float("nan"),
         "volume_error": None,  # deposited / model volume - 1: filled by the pipeline
         "width_error": {k: _pct(v["deformed"]) for k, v in errors.items()},
+        # the same lines against the profile's W(H) rather than the width they print (they
+        # differ where fit_flow scaled a component's speed)
+        "width_error_nominal": {k: _pct(v["nominal"]) for k, v in errors.items()},
         "width_error_undeformed": {k: _pct(v["undeformed"]) for k, v in errors.items()},
         "width_error_poisson_stripe": _pct(errors["stripe"]["poisson"]),
         # share of the measured points on lone lines (no other line within LONE_LINE x W:
