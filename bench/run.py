@@ -77,6 +77,9 @@ def _quality(tp: dict[str, Any]) -> str:
     we = tp["width_error"]
     parts = [f"{pat} width err p50/p90 {we[pat]['p50']:.3f}/{we[pat]['p90']:.3f}"
              for pat in ("contour", "stripe")]
+    nominal = tp.get("width_error_nominal", {}).get("contour")
+    if nominal:  # against the profile's W(H), not the width printed (differs when flow-fitted)
+        parts.append(f"contour vs W(H) p90 {nominal['p90']:.3f}")
     vol = tp.get("volume_error")
     parts.append(f"volume err {vol:+.4f}" if isinstance(vol, float) else "volume err -")
     st = tp.get("extrusion_starts", {})

@@ -98,6 +98,15 @@ def _cdf(ax: Axes, values: NDArray[np.float64], label: str, style: str) -> None:
     ax.plot(x, y, style, label=f"{label} (p90 {p90:.1f} %)")
 
 
+def _cdf_legend(ax: Axes, empty: str) -> None:
+    """The legend of the CDFs drawn on ``ax``, or ``empty`` where there was nothing to draw
+    (a job without stripe layers)."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="lower right")
+    else:
+        ax.text(50, 0.5, empty, ha="center", va="center", color="0.4")
+
+
 def write_toolpath_figures(result: ToolpathResult, layers: Layers, out_dir: Path) -> list[Path]:
     """Write the PNGs listed in the module docstring into ``out_dir``; returns their paths."""
     out_dir = Path(out_dir)
@@ -126,7 +135,7 @@ def write_toolpath_figures(result: ToolpathResult, layers: Layers, out_dir: Path
         ax.set_xlim(0, 100)
         ax.set_ylim(0, 1)
         ax.grid(alpha=0.3)
-        ax.legend(loc="lower right")
+        _cdf_legend(ax, f"no {pattern} layer measured")
     written.append(_save(fig, out_dir / "width_error_cdf.png"))
 
     fig, axes = _figure(6.0, 4.5)
@@ -139,7 +148,7 @@ def write_toolpath_figures(result: ToolpathResult, layers: Layers, out_dir: Path
     ax.set_xlim(0, 100)
     ax.set_ylim(0, 1)
     ax.grid(alpha=0.3)
-    ax.legend(loc="lower right")
+    _cdf_legend(ax, "no stripe layer measured")
     ax.set_title("stripe layers: stripes vs Poisson")
     written.append(_save(fig, out_dir / "stripe_vs_poisson.png"))
 
