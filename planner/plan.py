@@ -2,7 +2,8 @@
 
 Stages: normals (repair single-waypoint normal spikes), placement (search the model's place in
 the tank), resample (insert samples on long
-segments), orientation (spin and alpha per sample), velocity (DLS joint rates), timing (time law
+segments), orientation (spin and alpha per sample), continuity (insert samples where a step
+in joint space would swing the tip off the path), velocity (DLS joint rates), timing (time law
 within joint limits), report. ``plan`` returns the ``Trajectory`` stage and the report section.
 """
 
@@ -17,6 +18,7 @@ from scipy import ndimage
 
 from planner import kinematics as kin
 from planner.cell import CellConfig
+from planner.continuity import SWING_TOL_MM, subdivide
 from planner.entry import (
     TRANSFER,
     SafeMove,
@@ -273,6 +275,8 @@ def plan(
         samples = resample(toolpath, placement.model_T, cell)
     with timer.stage("orientation"):
         orient = choose(reach, samples.tcp, samples.normal, samples.tangent, samples.extrude)
+    with timer.stage("continuity"):
+        samples, orient, split = _continuous(reach, samples, orient)
     with timer.stage("entry"):
         # home -> above the first sample -> plunge along its nozzle axis; the mirror at the end
         heights = safe_heights(reach)
@@ -316,6 +320,7 @@ def plan(
         report["normals_repaired"] = int(repaired.sum())
         report["normals_smoothed_deg"] = _stats(np.degrees(smoothed))
         report["gel_fill_mm"] = cell.tank.gel_fill_mm
+        report["continuity"] = split
         report["entry"] = _move_report(entry, traj, part == 0)
         report["exit"] = _move_report(leave, traj, part == 2)
     un = report["unreachable"]
@@ -327,11 +332,56 @@ def plan(
         if not move.ok and status == "ok":
             status = (f"unreachable {name}: {move.reason}; move the part away from the walls "
                       "(placement) or change the home pose")
+    if split["worst_swing_mm"] > SWING_TOL_MM and status == "ok":
+        status = (f"the nozzle would leave the path by {split['worst_swing_mm']:.2f} mm between "
+                  "two samples (a pose next to a singularity); move the part (placement) or "
+                  "the robot base")
     if timing.status != "ok":
         status = timing.status
     report["status"] = status
     return PlanResult(traj, report, samples, orient, timing, placement, orient.clearance,
                       status)
+
+
+def _continuous(reach: Reach, samples: Samples, orient: Orientation
+                ) -> tuple[Samples, Orientation, dict[str, Any]]:
+    """Samples inserted where the joint-space step between two samples would swing the tip
+    off the path (``continuity.subdivide``), checked like the others; and the report."""
+    sub = subdivide(orient.q, reach.solve, reach.tool_m)
+    report: dict[str, Any] = {"tolerance_mm": SWING_TOL_MM,
+                              "steps_split": int(np.unique(sub.step).size),
+                              "samples_inserted": len(sub.step),
+                              "worst_swing_mm": round(sub.worst_mm, 4)}
+    if len(sub.step) == 0:
+        return samples, orient, report
+    k, f = sub.step, sub.fraction
+    at = k + 1  # np.insert keeps the order of equal positions: sorted by (step, fraction)
+
+    def between(a: np.ndarray) -> np.ndarray:
+        w = f.reshape((-1,) + (1,) * (a.ndim - 1))
+        return (1.0 - w) * a[k] + w * a[k + 1]
+
+    T = kin.fk(sub.q, reach.tool_m)
+    ev = reach.check(sub.q)
+    new_samples = Samples(
+        tcp=np.insert(samples.tcp, at, between(samples.tcp), axis=0),
+        normal=np.insert(samples.normal, at, unit(between(samples.normal)), axis=0),
+        tangent=np.insert(samples.tangent, at, samples.tangent[k], axis=0),
+        waypoint=np.insert(samples.waypoint, at, -1),
+        extrude=np.insert(samples.extrude, at, samples.extrude[k]),
+        speed=np.insert(samples.speed, at, between(samples.speed)),
+        height=np.insert(samples.height, at, between(samples.height)),
+    )
+    o = orient
+    new_orient = Orientation(
+        q=np.insert(o.q, at, sub.q, axis=0), axis=np.insert(o.axis, at, T[:, :3, 2], axis=0),
+        psi=np.insert(o.psi, at, between(o.psi)), tilt=np.insert(o.tilt, at, between(o.tilt)),
+        lean=np.insert(o.lean, at, between(o.lean)),
+        status=np.insert(o.status, at, ev.status).astype(np.int8),
+        pair=np.insert(o.pair, at, ev.pair).astype(np.int32),
+        clearance=np.insert(o.clearance, at, ev.clearance),
+    )
+    return new_samples, new_orient, report
 
 
 def _with_moves(reach: Reach, samples: Samples, orient: Orientation, entry: SafeMove,

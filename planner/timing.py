@@ -197,6 +197,14 @@ def time_law(
     # the curvature term q'' sdot^2 may use at most half the acceleration budget
     x_curv = np.min(0.5 * safety * amax / np.maximum(np.abs(ddq), 1e-12), axis=1)
     cap = np.minimum(np.minimum(x_speed, x_joint), x_curv)
+    # The robot moves linearly in joint space between samples, so each step must keep
+    # |dq| / dt within the limits whatever the rates above say (a spin or lean changed at
+    # one place, a pose next to a singularity): with both ends of a step below this cap,
+    # dt = 2 ds / (sdot_k + sdot_k+1) >= |dq| / (safety vmax).
+    x_step = np.min((safety * vmax * np.diff(s)[:, None]
+                     / np.maximum(np.abs(np.diff(q, axis=0)), 1e-12)) ** 2, axis=1)
+    cap[:-1] = np.minimum(cap[:-1], x_step)
+    cap[1:] = np.minimum(cap[1:], x_step)
     cap = np.minimum(cap, 1e12)
     cap[0] = cap[-1] = 0.0
     if stop is not None:

@@ -23,6 +23,7 @@ from mesp_cell.drivers.robot_base import UR5E_Q_LIMIT, UR5E_QD_LIMIT, RobotDrive
 from slicer.artifacts import load_npz
 from slicer.errors import InputError
 
+SWING_LIMIT_MM = 0.5  # a depositing step may bow off the straight step by this much at most
 TRAJECTORY_SCHEMA = {
     "t": (1, "f", None), "q": (2, "f", (6,)), "qd": (2, "f", (6,)), "tcp": (2, "f", (3,)),
     "waypoint": (1, "iu", None), "alpha": (1, "f", None), "extrude": (1, "b", None),
@@ -107,6 +108,19 @@ class StreamPlan:
             raise InputError(f"{path}: joint {j + 1} needs {np.degrees(speed[i, j]):.0f} deg/s "
                              f"at sample {i}, above the UR5e limit of 180 deg/s",
                              "re-plan the job with a lower speed")
+        # between samples the robot moves linearly in joint space: on a depositing step the
+        # nozzle must stay on the path (a plan of an older version, or a hand-made file)
+        from planner.continuity import swing
+
+        tool_m = np.asarray(a["tool_T"], dtype=np.float64).copy()
+        tool_m[:3, 3] /= 1000.0
+        dep = np.flatnonzero(ex[:-1] & ex[1:])
+        off = swing(np.stack([q[dep], q[dep + 1]], axis=1).reshape(-1, 6), tool_m)[::2]
+        if np.any(off > SWING_LIMIT_MM):
+            i = int(dep[np.argmax(off > SWING_LIMIT_MM)])
+            raise InputError(f"{path}: between samples {i} and {i + 1} the nozzle would leave "
+                             f"the path by {off.max():.1f} mm (joint-space motion next to a "
+                             "singularity)", "re-plan the job with this version of mesp plan")
         has = wp >= 0
         if np.any(np.diff(wp[has]) <= 0):
             raise InputError(f"{path}: waypoint indices are not increasing in time",

@@ -46,12 +46,21 @@ def test_resampling_keeps_every_waypoint_in_order(job: Path) -> None:
     assert plan.sample_of_waypoint(-1) == 0 and plan.sample_of_waypoint(3) == src[3] * 5
 
 
+def _swing_on_a_depositing_step(a: dict[str, np.ndarray]) -> None:
+    """The base turns 29 deg between two depositing samples, slowly enough for its speed
+    limit: linear in joint space, the nozzle would sweep an arc off the straight step."""
+    k = int(np.flatnonzero(a["extrude"][:-1] & a["extrude"][1:])[10])
+    a["q"][k + 1:, 0] += 0.5
+    a["t"][k + 1:] += 10.0
+
+
 @pytest.mark.parametrize("mutate, message", [
     (lambda a: a["q"].__setitem__((5, 2), np.nan), "NaN"),
     (lambda a: a["q"].__setitem__((5, 2), 7.0), "beyond the UR5e limit"),
     (lambda a: a["q"].__setitem__((slice(50, None), 0), a["q"][50:, 0] + 0.5), "deg/s"),
     (lambda a: a["t"].__setitem__(3, a["t"][2]), "does not increase"),
     (lambda a: a["waypoint"].__setitem__(0, 50), "not increasing"),
+    (_swing_on_a_depositing_step, "leave the path"),
 ])
 def test_bad_trajectories_are_refused_before_motion(tmp_path: Path, mutate, message) -> None:  # type: ignore[no-untyped-def]
     arrays = synthetic.trajectory_arrays(N_WP)

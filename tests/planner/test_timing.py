@@ -109,3 +109,21 @@ def test_last_step_of_each_path_keeps_the_toolpath_speed(lines_plan: PlanResult,
     # the job's very last step ends at rest (half speed on average); every other one is exact
     assert np.all(np.abs(v[:-1] / target[:-1] - 1.0) < 0.05)
     assert lines_plan.report["speed_ratio"]["within_5pct"] > 0.97
+
+
+def test_each_step_keeps_its_joint_speed_whatever_the_rates_say() -> None:
+    """A spin of 20 deg at one place (the rates, from the tool's motion, do not see it): the
+    time law gives that step time enough for the joint to turn within its limit."""
+    from planner.timing import time_law
+
+    M = 40
+    s = np.linspace(0.0, 39.0, M)  # mm: 1 mm steps
+    tcp = np.column_stack([s, np.zeros(M), np.zeros(M)])
+    q = np.zeros((M, 6))
+    q[20:, 5] = np.radians(20.0)  # the last joint turns 20 deg between samples 19 and 20
+    dq = np.full((M, 6), 1e-4)  # rad/mm: what the rates would say
+    vmax, amax = np.radians(np.full(6, 180.0)), np.radians(np.full(6, 800.0))
+    timing = time_law(q, dq, tcp, s, np.full(M, 50.0), vmax, amax)
+    speed = np.abs(np.diff(q, axis=0)) / np.diff(timing.t)[:, None]
+    assert np.all(speed <= vmax + 1e-9)
+    assert np.diff(timing.t)[19] >= np.radians(20.0) / vmax[5]
