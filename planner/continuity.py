@@ -60,8 +60,8 @@ class Subdivision(NamedTuple):
     worst_mm: float
 
 
-def _pair_swing(q0: np.ndarray, q1: np.ndarray, tool_m: np.ndarray) -> np.ndarray:
-    """(K,) mm, ``swing`` of K separate steps q0 -> q1 (K, 6)."""
+def pair_swing(q0: np.ndarray, q1: np.ndarray, tool_m: np.ndarray) -> np.ndarray:
+    """(K,) float64, mm, ``swing`` of K separate steps q0 -> q1, both (K, 6) rad."""
     tip0 = kin.fk(q0, tool_m)[:, :3, 3]
     tip1 = kin.fk(q1, tool_m)[:, :3, 3]
     mid = kin.fk(0.5 * (q0 + q1), tool_m)[:, :3, 3]
@@ -99,7 +99,7 @@ def subdivide(q: np.ndarray, solve: Callable[[np.ndarray, np.ndarray, np.ndarray
     new_owner, new_f, new_q = [], [], []
     worst = 0.0
     for depth in range(max_depth + 1):
-        off = _pair_swing(q0, q1, tool_m)
+        off = pair_swing(q0, q1, tool_m)
         split = np.flatnonzero(off > tol_mm)
         if split.size == 0:
             break

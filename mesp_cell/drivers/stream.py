@@ -110,12 +110,12 @@ class StreamPlan:
                              "re-plan the job with a lower speed")
         # between samples the robot moves linearly in joint space: on a depositing step the
         # nozzle must stay on the path (a plan of an older version, or a hand-made file)
-        from planner.continuity import swing
+        from planner.continuity import pair_swing
 
         tool_m = np.asarray(a["tool_T"], dtype=np.float64).copy()
         tool_m[:3, 3] /= 1000.0
         dep = np.flatnonzero(ex[:-1] & ex[1:])
-        off = swing(np.stack([q[dep], q[dep + 1]], axis=1).reshape(-1, 6), tool_m)[::2]
+        off = pair_swing(q[dep], q[dep + 1], tool_m)
         if np.any(off > SWING_LIMIT_MM):
             i = int(dep[np.argmax(off > SWING_LIMIT_MM)])
             raise InputError(f"{path}: between samples {i} and {i + 1} the nozzle would leave "
