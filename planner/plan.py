@@ -75,7 +75,8 @@ class PlanResult:
         report: the "plan" section of report.json.
         samples, orientation, timing, placement: intermediate values (for plots and tests).
         clearance: (M,) float64, mm, clearance along the trajectory (nan where not sampled).
-        status: "ok", or "unreachable waypoints" / the time law's status.
+        status: "ok", or "unreachable waypoints", "N samples between waypoints unreachable,
+            first after waypoint W: REASON", the entry's or exit's or the time law's status.
     """
 
     trajectory: Trajectory
@@ -325,9 +326,13 @@ def plan(
         report["exit"] = _move_report(leave, traj, part == 2)
     un = report["unreachable"]
     # entry and exit samples are reported under "entry"/"exit", not as between-waypoint ones
-    un["between_waypoints"] = int(((orient.status != OK) & (samples.waypoint < 0)
-                                   & (part == 1)).sum())
-    status = "ok" if not (un["count"] or un["between_waypoints"]) else "unreachable waypoints"
+    between = np.flatnonzero((orient.status != OK) & (samples.waypoint < 0) & (part == 1))
+    un["between_waypoints"] = int(between.size)
+    status = "ok"
+    if un["count"]:
+        status = "unreachable waypoints"
+    elif between.size:
+        status = _between_status(reach, samples, orient, between)
     for name, move in (("entry", entry), ("exit", leave)):
         if not move.ok and status == "ok":
             status = (f"unreachable {name}: {move.reason}; move the part away from the walls "
@@ -341,6 +346,22 @@ def plan(
     report["status"] = status
     return PlanResult(traj, report, samples, orient, timing, placement, orient.clearance,
                       status)
+
+
+def _between_status(reach: Reach, samples: Samples, orient: Orientation,
+                    failing: np.ndarray) -> str:
+    """The plan's status where every waypoint is reached but samples between them are not
+    (a long move, or the arm swinging next to a singularity): how many, the first one's
+    reason and the waypoint before it."""
+    i = int(failing[0])
+    before = samples.waypoint[: i + 1]
+    after = int(before[before >= 0][-1]) if (before >= 0).any() else -1
+    code = int(orient.status[i])
+    reason = REASONS.get(code, "unknown")
+    if code == COLLISION and orient.pair[i] >= 0:
+        reason = f"collision of {reach.collision.names[int(orient.pair[i])]}"
+    return (f"{failing.size} samples between waypoints unreachable, first after waypoint "
+            f"{after}: {reason}")
 
 
 def _continuous(reach: Reach, samples: Samples, orient: Orientation

@@ -65,3 +65,25 @@ def test_a_plan_keeps_the_tip_on_the_path_and_the_joints_within_limits(
     speed = np.abs(np.diff(tr.q, axis=0)) / np.diff(tr.t)[:, None]
     assert np.all(speed <= np.radians(cell.robot.max_velocity_deg_s) + 1e-9)
     assert "continuity" in dome_plan.report
+
+
+def test_samples_failing_between_waypoints_are_named_with_their_reason(
+        cell: CellConfig) -> None:
+    from planner.orientation import COLLISION, OK, Orientation
+    from planner.plan import Samples, _between_status
+
+    reach = Reach(cell)
+    M = 6
+    z = np.zeros((M, 3))
+    samples = Samples(tcp=z, normal=z, tangent=z,
+                      waypoint=np.array([0, -1, -1, 1, -1, 2], np.int32),
+                      extrude=np.ones(M, bool), speed=np.ones(M), height=np.ones(M))
+    status = np.full(M, OK, np.int8)
+    status[[2, 4]] = COLLISION
+    pair = np.full(M, -1, np.int32)
+    pair[2] = 0
+    orient = Orientation(q=np.zeros((M, 6)), axis=z, psi=np.zeros(M), tilt=np.zeros(M),
+                         lean=np.zeros(M), status=status, pair=pair, clearance=np.zeros(M))
+    text = _between_status(reach, samples, orient, np.array([2, 4]))
+    assert text.startswith("2 samples between waypoints unreachable, first after waypoint 0")
+    assert f"collision of {reach.collision.names[0]}" in text
