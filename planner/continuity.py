@@ -39,9 +39,21 @@ def swing(q: np.ndarray, tool_m: np.ndarray) -> np.ndarray:
     ``tool_m``: (4, 4) tool transform in m."""
     if len(q) < 2:
         return np.zeros(0)
-    tip = kin.fk(q, tool_m)[:, :3, 3]
-    mid = kin.fk(0.5 * (q[:-1] + q[1:]), tool_m)[:, :3, 3]
-    out: np.ndarray = np.linalg.norm(mid - 0.5 * (tip[:-1] + tip[1:]), axis=1) * 1000.0
+    tip = kin.fk(q, tool_m)[:, :3, 3]  # each configuration once: steps share their ends
+    return _bow(tip[:-1], tip[1:], 0.5 * (q[:-1] + q[1:]), tool_m)
+
+
+def pair_swing(q0: np.ndarray, q1: np.ndarray, tool_m: np.ndarray) -> np.ndarray:
+    """(K,) float64, mm, ``swing`` of K separate steps q0 -> q1, both (K, 6) rad."""
+    return _bow(kin.fk(q0, tool_m)[:, :3, 3], kin.fk(q1, tool_m)[:, :3, 3], 0.5 * (q0 + q1),
+                tool_m)
+
+
+def _bow(tip0: np.ndarray, tip1: np.ndarray, q_mid: np.ndarray, tool_m: np.ndarray
+         ) -> np.ndarray:
+    """(K,) mm, distance of the tip at ``q_mid`` from the midpoint of tips (K, 3) m."""
+    mid = kin.fk(q_mid, tool_m)[:, :3, 3]
+    out: np.ndarray = np.linalg.norm(mid - 0.5 * (tip0 + tip1), axis=1) * 1000.0
     return out
 
 
@@ -50,23 +62,15 @@ class Subdivision(NamedTuple):
 
     step: (S,) int64, index of the step (between samples step and step + 1) each new sample
         lies on; fraction: (S,) float64 in (0, 1), its position along the step; q: (S, 6)
-        float64, rad, its configuration (nan where inverse kinematics has no solution).
-    worst_mm: float, largest swing left over the split steps (their pieces).
+        float64, rad, its configuration (points without an inverse kinematics solution are
+        left out).
+    worst_mm: float, largest swing left over the split steps (their pieces; 0 if none).
     """
 
     step: np.ndarray
     fraction: np.ndarray
     q: np.ndarray
     worst_mm: float
-
-
-def pair_swing(q0: np.ndarray, q1: np.ndarray, tool_m: np.ndarray) -> np.ndarray:
-    """(K,) float64, mm, ``swing`` of K separate steps q0 -> q1, both (K, 6) rad."""
-    tip0 = kin.fk(q0, tool_m)[:, :3, 3]
-    tip1 = kin.fk(q1, tool_m)[:, :3, 3]
-    mid = kin.fk(0.5 * (q0 + q1), tool_m)[:, :3, 3]
-    out: np.ndarray = np.linalg.norm(mid - 0.5 * (tip0 + tip1), axis=1) * 1000.0
-    return out
 
 
 def subdivide(q: np.ndarray, solve: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
@@ -83,9 +87,12 @@ def subdivide(q: np.ndarray, solve: Callable[[np.ndarray, np.ndarray, np.ndarray
             on the trajectory's branch wrapped next to ``q_ref`` (``orientation.Reach.solve``).
         tool_m: (4, 4) tool transform in m.
     """
+    def nothing(worst: float) -> Subdivision:
+        return Subdivision(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 6)), worst)
+
     bad = np.flatnonzero(swing(q, tool_m) > tol_mm)
     if bad.size == 0:
-        return Subdivision(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 6)), 0.0)
+        return nothing(0.0)
     Ta = kin.fk(q[bad], tool_m)
     Tb = kin.fk(q[bad + 1], tool_m)
     tip_a, tip_b = Ta[:, :3, 3] * 1000.0, Tb[:, :3, 3] * 1000.0
@@ -123,7 +130,7 @@ def subdivide(q: np.ndarray, solve: Callable[[np.ndarray, np.ndarray, np.ndarray
         if owner.size == 0:
             break
     if not new_owner:
-        return Subdivision(np.zeros(0, np.int64), np.zeros(0), np.zeros((0, 6)), worst)
+        return nothing(worst)
     o_all = np.concatenate(new_owner)
     f_all = np.concatenate(new_f)
     order = np.lexsort((f_all, o_all))
