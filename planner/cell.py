@@ -203,6 +203,7 @@ class PlanningConfig:
     alpha_min_deg: float = 70.0
     alpha_max_deg: float = 110.0
     lean_max_deg: float = 30.0
+    upright_max_deg: float = 20.0
     smooth_waypoints: int = 2
     smooth_max_deg: float = 8.0
     clearance_mm: float = 3.0
@@ -221,6 +222,8 @@ class PlanningConfig:
             raise ValueError("need 0 <= alpha_min_deg <= 90 <= alpha_max_deg <= 180")
         if not 0 <= self.lean_max_deg <= 60:
             raise ValueError("lean_max_deg must lie in [0, 60]")
+        if not 0 <= self.upright_max_deg <= 45:
+            raise ValueError("upright_max_deg must lie in [0, 45]")
         if self.smooth_waypoints < 0 or not 0 <= self.smooth_max_deg <= 20:
             raise ValueError("need smooth_waypoints >= 0 and smooth_max_deg in [0, 20]")
         if self.clearance_mm < 0 or self.joint_margin_deg < 0:

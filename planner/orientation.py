@@ -278,7 +278,7 @@ REPAIR_ROUNDS = 4  # repair, ramp, re-check: a ramp may break a neighbour, so re
 REPAIR_BATCH = 2048  # poses per check while repairing (failing samples x candidates)
 
 
-def _ramp(dev: np.ndarray, per_sample: float) -> np.ndarray:
+def ramp(dev: np.ndarray, per_sample: float) -> np.ndarray:
     """Spread deviations so they ramp in and out at ``per_sample`` rad per sample."""
     width = int(min(np.ceil(np.abs(dev).max() / per_sample), 2000)) if dev.size else 0
     if width == 0:
@@ -346,8 +346,8 @@ def choose(
     psi = np.interp(np.arange(M), sub, psi_sub)
     # ramp tilts and leans in and out (1 deg per sample) instead of stepping between levels
     per_sample = np.radians(1.0)
-    tilt = _ramp(np.interp(np.arange(M), sub, dev_sub[:, 0]), per_sample)
-    lean = _ramp(np.interp(np.arange(M), sub, dev_sub[:, 1]), per_sample)
+    tilt = ramp(np.interp(np.arange(M), sub, dev_sub[:, 0]), per_sample)
+    lean = ramp(np.interp(np.arange(M), sub, dev_sub[:, 1]), per_sample)
     lo_a, hi_a = np.radians([cell.planning.alpha_min_deg, cell.planning.alpha_max_deg])
     tilt = np.where(extrude, np.clip(tilt, alpha0 - hi_a, alpha0 - lo_a), tilt)
 
@@ -432,9 +432,9 @@ def choose(
         if round_ == REPAIR_ROUNDS - 1:
             psi, tilt, lean = new_psi, new_tilt, new_lean
         else:
-            psi = psi + _ramp(new_psi - psi, per_sample)
-            tilt = tilt + _ramp(new_tilt - tilt, per_sample)
-            lean = lean + _ramp(new_lean - lean, per_sample)
+            psi = psi + ramp(new_psi - psi, per_sample)
+            tilt = tilt + ramp(new_tilt - tilt, per_sample)
+            lean = lean + ramp(new_lean - lean, per_sample)
         # keep extruding samples' alpha in range: alpha = alpha0 - tilt
         tilt = np.where(extrude, np.clip(tilt, alpha0 - hi_a, alpha0 - lo_a), tilt)
         changed = np.flatnonzero((np.abs(psi - old_psi) > 1e-12)

@@ -38,6 +38,7 @@ from planner.timing import (  # noqa: F401  (path_parameter: re-exported)
     time_law,
 )
 from planner.trajectory import Trajectory
+from planner.upright import COMFORT, Upright, upright
 from slicer.errors import InputError
 from slicer.progress import Progress, StageTimer
 from slicer.stages import Toolpath
@@ -274,8 +275,10 @@ def plan(
             placement = choose_placement(reach, toolpath)
     with timer.stage("resample"):
         samples = resample(toolpath, placement.model_T, cell)
+    with timer.stage("upright"):
+        up = upright(reach, samples.tcp, samples.normal, samples.tangent, samples.extrude)
     with timer.stage("orientation"):
-        orient = choose(reach, samples.tcp, samples.normal, samples.tangent, samples.extrude)
+        orient = choose(reach, samples.tcp, up.normal, samples.tangent, samples.extrude)
     with timer.stage("continuity"):
         samples, orient, split = _continuous(reach, samples, orient)
     with timer.stage("entry"):
@@ -322,6 +325,7 @@ def plan(
         report["normals_smoothed_deg"] = _stats(np.degrees(smoothed))
         report["gel_fill_mm"] = cell.tank.gel_fill_mm
         report["continuity"] = split
+        report["upright"] = _upright_report(up, orient, part == 1)
         report["entry"] = _move_report(entry, traj, part == 0)
         report["exit"] = _move_report(leave, traj, part == 2)
     un = report["unreachable"]
@@ -346,6 +350,18 @@ def plan(
     report["status"] = status
     return PlanResult(traj, report, samples, orient, timing, placement, orient.clearance,
                       status)
+
+
+def _upright_report(up: Upright, orient: Orientation, main: np.ndarray) -> dict[str, Any]:
+    """How many samples were turned towards vertical, how far, and the singularity margins
+    on the layer normals and along the planned motion (``main``: (M,) bool, the toolpath's
+    samples, without entry and exit)."""
+    margin = kin.singularity_margin(orient.q[main])
+    return {"samples": int(np.sum(up.angle > 1e-9)),
+            "max_deg": round(float(np.degrees(up.angle.max())), 3) if len(up.angle) else 0.0,
+            "comfort_margin": COMFORT,
+            "margin_on_normal_min": round(float(up.margin.min()), 4) if len(up.margin) else 1.0,
+            "margin_min": round(float(np.nanmin(margin)), 4) if margin.size else 1.0}
 
 
 def _between_status(reach: Reach, samples: Samples, orient: Orientation,

@@ -18,7 +18,9 @@ Plan the UR5e motion for a sliced job (paper sections 3.1 and 5.2).
 
 Reads DIR/toolpath.npz, fills the gel to 15 mm above the part (cell: fit_gel, gel_cover_mm),
 places the model in the gel tank (searching position and rotation for the best clearance),
-orients the nozzle along -normal (alpha = 90 deg; only where limits, singularities or
+turns the printing direction towards vertical where following it would bring the wrist near
+the base axis (up to upright_max_deg, alpha kept within range), orients the nozzle along
+-normal (alpha = 90 deg; only where limits, singularities or
 collisions demand, leaned about the direction of motion up to lean_max_deg, which keeps alpha,
 or tilted within [70, 110] deg, the smallest deviation first), solves the joint motion by
 damped-least-squares differential kinematics and times it within the joint velocity and

@@ -125,12 +125,12 @@ def _fixed_placement(cell: CellConfig, tp: Toolpath):  # type: ignore[no-untyped
 
 
 def test_ramp_keeps_peaks_and_limits_the_slope() -> None:
-    from planner.orientation import _ramp
+    from planner.orientation import ramp
 
     dev = np.zeros(60)
     dev[20:25] = 0.2
     dev[45] = -0.1
-    out = _ramp(dev, 0.05)
+    out = ramp(dev, 0.05)
     assert np.allclose(out[20:25], 0.2) and np.isclose(out[45], -0.1)
     assert np.abs(np.diff(out)).max() <= 0.05 + 1e-12
     assert np.all(np.abs(out) >= np.abs(dev) - 1e-12)
