@@ -46,6 +46,9 @@ class Placement:
         worst_reason: reason code of the first unreachable sampled waypoint (0 if none;
             100 + pair index for a collision).
         worst_waypoint: its toolpath index (-1 if none).
+        alternatives: other placements the search found reaching every sampled waypoint, the
+            yaws far apart first (see ``_alternatives``): (x, y, yaw_deg, clearance_mm).
+            The planner tries them where the entry or exit is blocked at this one.
     """
 
     model_T: np.ndarray
@@ -56,6 +59,7 @@ class Placement:
     evaluated: int
     worst_reason: int
     worst_waypoint: int
+    alternatives: tuple[tuple[float, float, float, float], ...] = ()
 
 
 def bbox(toolpath: Toolpath) -> tuple[np.ndarray, np.ndarray]:
@@ -385,4 +389,29 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
             _fix_text(reach, reason),
         )
     model_T = model_transform(cell, box, np.array(offset), best[2])
-    return Placement(model_T, offset, float(best[2] % 360.0), u, c, evaluated, reason, wp)
+    return Placement(model_T, offset, float(best[2] % 360.0), u, c, evaluated, reason, wp,
+                     _alternatives(cache, best))
+
+
+YAW_APART_DEG = 60.0  # alternatives whose yaws differ this much from each other come first
+
+
+def _alternatives(cache: dict[tuple[float, float, float], tuple[int, float, int, int]],
+                  best: tuple[float, float, float]
+                  ) -> tuple[tuple[float, float, float, float], ...]:
+    """Scored placements that reach every sampled waypoint, other than ``best``, as
+    (x, y, yaw_deg, clearance_mm), by clearance (largest first); those whose yaw lies at
+    least ``YAW_APART_DEG`` from ``best``'s and from every one taken before them come first
+    (a blocked entry or exit depends on where the job starts and ends: turn it away)."""
+    chosen = (round(best[0], 6), round(best[1], 6), round(best[2] % 360.0, 6))
+    ok = sorted(((k, v[1]) for k, v in cache.items() if v[0] == 0 and k != chosen),
+                key=lambda kv: -kv[1])
+    yaws = [chosen[2]]
+    first: list[tuple[float, float, float, float]] = []
+    rest: list[tuple[float, float, float, float]] = []
+    for k, c in ok:
+        apart = all(abs((k[2] - y + 180.0) % 360.0 - 180.0) >= YAW_APART_DEG for y in yaws)
+        (first if apart else rest).append((*k, c))
+        if apart:
+            yaws.append(k[2])
+    return tuple(first + rest)

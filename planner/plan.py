@@ -1,10 +1,14 @@
 """Toolpath -> timed UR5e joint trajectory: the ``mesp plan`` pipeline as a library call.
 
 Stages: normals (repair single-waypoint normal spikes), placement (search the model's place in
-the tank), resample (insert samples on long
-segments), orientation (spin and alpha per sample), continuity (insert samples where a step
-in joint space would swing the tip off the path), velocity (DLS joint rates), timing (time law
-within joint limits), report. ``plan`` returns the ``Trajectory`` stage and the report section.
+the tank), resample (insert samples on long segments), upright (turn printing directions
+towards vertical where the wrist would near the base axis), orientation (spin and alpha per
+sample), continuity (insert samples where a step in joint space would swing the tip off the
+path), entry (into and out of the gel along the nozzle axis), velocity (DLS joint rates),
+timing (time law within joint limits), report. Where the entry or exit is blocked at the
+searched placement, the stages after it run again at the search's next placements (another
+yaw first: where the job starts and ends decides). ``plan`` returns the ``Trajectory`` stage
+and the report section.
 """
 
 from __future__ import annotations
@@ -28,7 +32,14 @@ from planner.entry import (
     safe_move,
 )
 from planner.orientation import COLLISION, OK, REASONS, Orientation, Reach, alpha_of, choose, unit
-from planner.placement import Placement, choose_placement, fit_gel, waypoint_tangents
+from planner.placement import (
+    Placement,
+    bbox,
+    choose_placement,
+    fit_gel,
+    model_transform,
+    waypoint_tangents,
+)
 from planner.timing import (  # noqa: F401  (path_parameter: re-exported)
     ROTATION_MM_PER_RAD,
     Timing,
@@ -271,8 +282,41 @@ def plan(
         toolpath, smoothed = smooth_normals(toolpath, cell.planning.smooth_waypoints,
                                             cell.planning.smooth_max_deg)
     with timer.stage("placement"):
+        searched = placement is None
         if placement is None:
             placement = choose_placement(reach, toolpath)
+    result = _plan_placed(toolpath, reach, placement, timer, repaired, smoothed)
+    if searched and _blocked(result):
+        # the entry or exit depends on where the job starts and ends, which the placement
+        # score does not see: re-plan at the search's other reaching placements
+        box = bbox(toolpath)
+        tries = 0
+        for x, y, yaw, clear in placement.alternatives[:REPLANS]:
+            tries += 1
+            offset = (x, y, cell.placement.offset_mm[2])
+            alt = replace(placement, model_T=model_transform(cell, box, np.array(offset), yaw),
+                          offset_mm=offset, yaw_deg=yaw, clearance_mm=clear)
+            again = _plan_placed(toolpath, reach, alt, timer, repaired, smoothed)
+            again.report["placement"]["replanned"] = tries
+            if not _blocked(again):
+                return again
+        result.report["placement"]["replanned"] = tries
+    return result
+
+
+REPLANS = 4  # placements tried after the best one where its entry or exit is blocked
+
+
+def _blocked(result: PlanResult) -> bool:
+    """The entry into or the exit out of the gel cannot be executed."""
+    return bool(result.report["entry"]["status"] != "ok"
+                or result.report["exit"]["status"] != "ok")
+
+
+def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: StageTimer,
+                 repaired: np.ndarray, smoothed: np.ndarray) -> PlanResult:
+    """The stages after the placement (module docstring), for one placement."""
+    cell = reach.cell
     with timer.stage("resample"):
         samples = resample(toolpath, placement.model_T, cell)
     with timer.stage("upright"):

@@ -9,7 +9,8 @@ import pytest
 
 from planner.cell import CellConfig
 from planner.orientation import Reach
-from planner.placement import choose_placement
+from planner.placement import YAW_APART_DEG, choose_placement, fit_gel
+from planner.plan import plan
 from slicer.errors import InputError
 from slicer.stages import Toolpath
 from tests.planner import synthetic
@@ -77,3 +78,40 @@ def test_batched_level_search_equals_level_by_level(cell: CellConfig,
         assert np.array_equal(batched.best, single.best)
         assert np.all(batched.level >= 0) and np.any(batched.level > 1)  # beyond block 1
         assert s_batched == placement.score(reach, tp, model_T, idx)
+
+
+def test_alternatives_reach_and_turn_the_job_away_from_the_best_yaw(cell: CellConfig,
+                                                                     dome_tp: Toolpath) -> None:
+    p = choose_placement(Reach(cell), dome_tp)
+    alts = p.alternatives
+    assert len(alts) >= 2
+    assert all((x, y, yaw) != (*p.offset_mm[:2], p.yaw_deg) for x, y, yaw, _ in alts)
+
+    def apart(a: float, b: float) -> float:
+        return abs((a - b + 180.0) % 360.0 - 180.0)
+
+    # the leading alternatives lie at least YAW_APART_DEG from the best and from each other
+    lead = []
+    for a in alts:
+        if all(apart(a[2], y) >= YAW_APART_DEG for y in [p.yaw_deg, *[b[2] for b in lead]]):
+            lead.append(a)
+        else:
+            break
+    assert len(lead) >= 2
+    clear = [a[3] for a in lead]
+    assert clear == sorted(clear, reverse=True)
+
+
+def test_a_blocked_entry_is_replanned_at_another_yaw(cell: CellConfig) -> None:
+    # a cup's rounded bottom under a 150 mm part: where the job starts on the far side, its
+    # nozzle leans 40 deg towards the robot and the line to plunge along leaves the arm's
+    # reach; the searched placement starts it there, another yaw does not
+    tp = synthetic.rings(45.0, [0.0, 150.0], [40.0, 0.0], step=1.0)
+    searched = choose_placement(Reach(fit_gel(cell, tp)), tp)
+    blocked = plan(tp, cell, placement=searched)
+    assert blocked.report["entry"]["status"] != "ok"
+    result = plan(tp, cell)
+    assert result.status == "ok"
+    assert result.report["entry"]["status"] == "ok" and result.report["exit"]["status"] == "ok"
+    assert result.report["placement"]["replanned"] >= 1
+    assert result.placement.yaw_deg != searched.yaw_deg
