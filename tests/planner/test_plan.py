@@ -63,6 +63,7 @@ def test_mesp_plan_command(lines_tp: Toolpath, tmp_path: Path, capsys) -> None: 
     assert (tmp_path / "figures" / "plan_joints.png").is_file()
     assert (tmp_path / "figures" / "plan_alpha.png").is_file()
     assert (tmp_path / "figures" / "plan_clearance.png").is_file()
+    assert (tmp_path / "figures" / "plan_margin.png").is_file()
 
 
 def test_mesp_plan_user_errors(tmp_path: Path, capsys) -> None:  # type: ignore[no-untyped-def]
