@@ -7,6 +7,8 @@
     .venv/bin/python bench/bench_planner.py --toolpath out/socket --toolpath out/hemi  # examples
 
 Prints one JSON object per job (``--toolpath`` jobs: one line each, then a Markdown table).
+Each plan is also put through the robot streamer's own checks before motion
+(``StreamPlan.load``: joint speeds, the nozzle's bow off a depositing step), as the cell would.
 ``speed_within_5pct`` is the fraction of extruding waypoints whose TCP speed on the following
 step lies within 5 % of the toolpath speed (target: >= 0.99); repeated waypoints (zero-length
 steps) have no speed and are left out.
@@ -18,6 +20,7 @@ import argparse
 import json
 import resource
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -25,10 +28,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from mesp_cell.drivers.stream import StreamPlan
 from planner.cell import load_cell
 from planner.plan import plan
+from slicer.errors import InputError
 from slicer.stages import Toolpath
 from tests.planner import synthetic
+
+STREAM_DT_S = 0.002  # the UR5e servo period the streamer resamples at
 
 
 def speed_fidelity(result) -> float:  # type: ignore[no-untyped-def]
@@ -42,12 +49,24 @@ def speed_fidelity(result) -> float:  # type: ignore[no-untyped-def]
     return float(np.mean(np.abs(v[pick] / target[pick] - 1.0) <= 0.05)) if pick.any() else 1.0
 
 
+def streamer_verdict(result) -> str:  # type: ignore[no-untyped-def]
+    """"accepts", or the streamer's one-line refusal of the planned trajectory."""
+    with tempfile.TemporaryDirectory() as tmp:
+        path = result.trajectory.save(Path(tmp))
+        try:
+            StreamPlan.load(path, STREAM_DT_S)
+        except InputError as e:
+            return f"refuses: {e}"
+    return "accepts"
+
+
 def run_one(tp: Toolpath, cell, source: str) -> dict:  # type: ignore[no-untyped-def]
     """Plan ``tp`` once and collect the benchmark numbers."""
     wall, cpu = time.perf_counter(), time.process_time()
     result = plan(tp, cell)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     rep = result.report
+    peak = round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1)
     return {
         "source": source,
         "waypoints": len(tp),
@@ -58,7 +77,7 @@ def run_one(tp: Toolpath, cell, source: str) -> dict:  # type: ignore[no-untyped
         "waypoints_per_s_cpu": round(len(tp) / cpu),
         "speed_within_5pct": speed_fidelity(result),
         "stage_s": rep["timing_s"],
-        "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+        "peak_rss_mb": peak,
         "status": rep["status"],
         "min_clearance_mm": rep["min_clearance_mm"],
         "min_clearance_pair": rep["min_clearance_pair"],
@@ -76,23 +95,30 @@ def run_one(tp: Toolpath, cell, source: str) -> dict:  # type: ignore[no-untyped
         "placement": rep["placement"],
         "over_deposition": rep["over_deposition"],
         "duration_s": rep["duration_s"],
+        "upright": rep["upright"],
+        "continuity": rep["continuity"],
+        "streamer": streamer_verdict(result),
     }
 
 
 def table(rows: list[dict]) -> str:
     """The per-example Markdown table."""
-    head = ("| job | waypoints | plan s | wp/s | duration h | speed within 5% | "
-            "over-deposition | min clearance mm | alpha deg | lean deg | unreachable (reasons) |")
-    out = [head, "|" + " --- |" * 11]
+    head = ("| job | status | waypoints | plan s | wp/s | duration h | speed within 5% | "
+            "over-deposition | min clearance mm | alpha deg | lean deg | uprighted (max deg) | "
+            "singularity margin | inserted (steps) | unreachable (reasons) | streamer |")
+    out = [head, "|" + " --- |" * 16]
     for r in rows:
         reasons = ", ".join(f"{k}: {v}" for k, v in r["unreachable_by_reason"].items())
+        up, cont = r["upright"], r["continuity"]
         out.append(
-            f"| {Path(r['source']).name} | {r['waypoints']} | {r['wall_s']:.1f} | "
-            f"{r['waypoints_per_s_wall']} | {r['duration_s'] / 3600:.2f} | "
+            f"| {Path(r['source']).name} | {r['status']} | {r['waypoints']} | "
+            f"{r['wall_s']:.1f} | {r['waypoints_per_s_wall']} | {r['duration_s'] / 3600:.2f} | "
             f"{100 * r['speed_within_5pct']:.2f}% | "
             f"{100 * r['over_deposition']['fraction']:.3f}% | {r['min_clearance_mm']:.1f} | "
-            f"{r['alpha_deg']} | {r['lean_deg']} | {r['unreachable']}"
-            + (f" ({reasons})" if reasons else "") + " |")
+            f"{r['alpha_deg']} | {r['lean_deg']} | {up['samples']} ({up['max_deg']:g}) | "
+            f"{up['margin_min']:.3f} | {cont['samples_inserted']} ({cont['steps_split']}) | "
+            f"{r['unreachable']}" + (f" ({reasons})" if reasons else "")
+            + f" | {r['streamer']} |")
     return "\n".join(out)
 
 

@@ -298,6 +298,7 @@ def choose(
     extrude: np.ndarray,
     coarse: int = 600,
     clearance_stride: int = 4,
+    arrive: np.ndarray | None = None,
 ) -> Orientation:
     """Pick spin, tilt and lean for every sample (see module docstring).
 
@@ -309,9 +310,20 @@ def choose(
         coarse: size of the subsample for the spin search.
         clearance_stride: full-resolution clearance every this many samples (plus every
             sample near the required clearance).
+        arrive: (M, 3) float64, unit direction of the depositing step arriving at each sample
+            (zero rows where the arriving step does not deposit); alpha must hold against it
+            too. None: only ``tangent`` is checked.
     """
     cell = reach.cell
     M = len(tcp)
+    arriving = (np.zeros((M, 3)) if arrive is None else np.asarray(arrive, dtype=float))
+    has_arrive = np.linalg.norm(arriving, axis=1) > 0.5
+
+    def allowed(ax: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """(len(rows),) bool: alpha within range against the leaving and arriving steps."""
+        return (alpha_allowed(cell, alpha_of(ax, tangent[rows]), extrude[rows])
+                & alpha_allowed(cell, alpha_of(ax, arriving[rows]), has_arrive[rows]))
+
     K = cell.planning.spin_steps
     grid = np.linspace(-np.pi, np.pi, K, endpoint=False)
     alpha0 = alpha_of(-normal, tangent)
@@ -336,8 +348,7 @@ def choose(
         q = reach.solve(np.repeat(tcp[idx], K, axis=0), R, reach.home)
         ev = reach.check(q, iters=8)
         c = reach.cost(ev).reshape(len(idx), K) + (tilt_l / w_tilt) ** 2 + (lean_l / w_lean) ** 2
-        allowed = alpha_allowed(cell, alpha_of(ax, tangent[idx]), extrude[idx])
-        c[~allowed] = np.inf
+        c[~allowed(ax, idx)] = np.inf
         cost[todo] = c
         dev[todo] = (tilt_l, lean_l)
     path = _viterbi(cost, grid, weight=10.0)
@@ -378,7 +389,7 @@ def choose(
         status = ev.status.copy()
         hit = has & (np.nan_to_num(clear, nan=np.inf) < cell.planning.clearance_mm)
         status[hit & (status == OK)] = COLLISION
-        off = ~alpha_allowed(cell, alpha_of(ax, tangent[rows]), extrude[rows])
+        off = ~allowed(ax, rows)
         status[off & (status == OK)] = ALPHA
         ev = Evaluation(q, status, ev.singular, clear, ev.margin, pair)
         return q, ev, ax
@@ -460,7 +471,7 @@ def choose(
     q = _make_continuous(q, reach.home, reach.lo, reach.hi)
     lim_bad = np.any((q < reach.lo_safe) | (q > reach.hi_safe), axis=1) & (status == OK)
     status[lim_bad] = JOINT_LIMIT
-    off = ~alpha_allowed(cell, alpha_of(axis, tangent), extrude) & (status == OK)
+    off = ~allowed(axis, np.arange(M)) & (status == OK)
     status[off] = ALPHA
     return Orientation(q, axis, psi, tilt, lean, status, pair, clearance)
 

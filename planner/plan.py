@@ -31,7 +31,18 @@ from planner.entry import (
     safe_heights,
     safe_move,
 )
-from planner.orientation import COLLISION, OK, REASONS, Orientation, Reach, alpha_of, choose, unit
+from planner.orientation import (
+    ALPHA,
+    COLLISION,
+    OK,
+    REASONS,
+    Orientation,
+    Reach,
+    alpha_allowed,
+    alpha_of,
+    choose,
+    unit,
+)
 from planner.placement import (
     Placement,
     bbox,
@@ -62,11 +73,15 @@ class Samples:
     Attributes:
         tcp: (M, 3) float64, mm, target nozzle tip positions.
         normal: (M, 3) float64, unit printing directions.
-        tangent: (M, 3) float64, unit motion directions.
+        tangent: (M, 3) float64, unit motion directions: of the step leaving the sample where
+            it deposits, of the step arriving where only that one deposits.
         waypoint: (M,) int32, toolpath index, -1 for inserted samples.
         extrude: (M,) bool, deposit on the step to the next sample.
         speed: (M,) float64, mm/s, target TCP speed.
         height: (M,) float64, mm, layer height (for over-deposition).
+        arrive: (M, 3) float64, unit direction of the step arriving at the sample where that
+            step deposits, zero rows elsewhere. A filament is laid along each depositing step
+            with the nozzle of both its ends, so alpha is checked against both directions.
     """
 
     tcp: np.ndarray
@@ -76,6 +91,7 @@ class Samples:
     extrude: np.ndarray
     speed: np.ndarray
     height: np.ndarray
+    arrive: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -101,6 +117,10 @@ class PlanResult:
     status: str
 
 
+ALPHA_MIN_STEP_MM = 0.1  # a depositing step shorter than this lays a dot, not a filament:
+# its direction (noise of the map-back at that length) does not constrain alpha
+
+
 def resample(toolpath: Toolpath, model_T: np.ndarray, cell: CellConfig) -> Samples:
     """Map waypoints into the base frame and insert samples so no step exceeds max_step_mm."""
     R = model_T[:3, :3]
@@ -111,7 +131,8 @@ def resample(toolpath: Toolpath, model_T: np.ndarray, cell: CellConfig) -> Sampl
     planning = cell.planning
     if N == 1:
         return Samples(P, Nn, T, np.zeros(1, np.int32), np.zeros(1, bool),
-                       np.full(1, planning.travel_speed_mm_s), toolpath.height.copy())
+                       np.full(1, planning.travel_speed_mm_s), toolpath.height.copy(),
+                       np.zeros((1, 3)))
     seg = P[1:] - P[:-1]
     length = np.linalg.norm(seg, axis=1)
     inner = toolpath.path[1:] == toolpath.path[:-1]
@@ -129,12 +150,29 @@ def resample(toolpath: Toolpath, model_T: np.ndarray, cell: CellConfig) -> Sampl
         [unit(Nn[seg_of] * (1 - f[:, None]) + Nn[seg_of + 1] * f[:, None]), Nn[-1:]]
     )
     seg_dir = unit(seg)
-    # waypoints keep their path direction; inserted samples move along their segment
+    # alpha is a property of the filament laid down: a waypoint's direction is that of the
+    # depositing segment leaving it, else of the one arriving, else (a move) its path's
+    seg_live = seg_extrude & (length > ALPHA_MIN_STEP_MM)
+    ext_in = np.r_[False, seg_live]
+    ext_out = np.r_[seg_live, False]
+    T = T.copy()
+    out = np.flatnonzero(ext_out)
+    T[out] = seg_dir[out]
+    stops = np.flatnonzero(ext_in & ~ext_out)
+    T[stops] = seg_dir[stops - 1]
+    arrive_wp = np.zeros((N, 3))
+    arr = np.flatnonzero(ext_in)
+    arrive_wp[arr] = seg_dir[arr - 1]
+    # inserted samples move along their segment
     tangent = np.where((k == 0)[:, None], T[seg_of], seg_dir[seg_of])
     tangent = np.concatenate([tangent, T[-1:]])
     bad = np.linalg.norm(tangent, axis=1) < 0.5
     tangent[bad] = np.concatenate([seg_dir, seg_dir[-1:]])[np.minimum(
         np.concatenate([seg_of, [N - 2]])[bad], N - 2)]
+    inserted_live = (k > 0) & seg_live[seg_of]
+    arrive = np.where((k == 0)[:, None], arrive_wp[seg_of],
+                      np.where(inserted_live[:, None], seg_dir[seg_of], 0.0))
+    arrive = np.concatenate([arrive, arrive_wp[-1:]])
     waypoint = np.concatenate([np.where(k == 0, seg_of, -1), [N - 1]]).astype(np.int32)
     extrude = np.concatenate([seg_extrude[seg_of], [False]])
     # a waypoint sample keeps its own toolpath speed, also where the next segment is a move
@@ -146,7 +184,7 @@ def resample(toolpath: Toolpath, model_T: np.ndarray, cell: CellConfig) -> Sampl
                                      + seg_v1[seg_of] * f), own[-1:]])
     h = toolpath.height
     height = np.concatenate([h[seg_of] * (1 - f) + h[seg_of + 1] * f, h[-1:]])
-    return Samples(tcp, normal, tangent, waypoint, extrude, speed, height)
+    return Samples(tcp, normal, tangent, waypoint, extrude, speed, height, arrive)
 
 
 def repair_normals(toolpath: Toolpath, spike_deg: float = 20.0,
@@ -320,9 +358,11 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
     with timer.stage("resample"):
         samples = resample(toolpath, placement.model_T, cell)
     with timer.stage("upright"):
-        up = upright(reach, samples.tcp, samples.normal, samples.tangent, samples.extrude)
+        up = upright(reach, samples.tcp, samples.normal, samples.tangent, samples.extrude,
+                     samples.arrive)
     with timer.stage("orientation"):
-        orient = choose(reach, samples.tcp, up.normal, samples.tangent, samples.extrude)
+        orient = choose(reach, samples.tcp, up.normal, samples.tangent, samples.extrude,
+                        arrive=samples.arrive)
     with timer.stage("continuity"):
         samples, orient, split = _continuous(reach, samples, orient)
     with timer.stage("entry"):
@@ -444,21 +484,30 @@ def _continuous(reach: Reach, samples: Samples, orient: Orientation
 
     T = kin.fk(sub.q, reach.tool_m)
     ev = reach.check(sub.q)
+    # an inserted sample moves along its step's chord, and its alpha is checked against it
+    step = samples.tcp[k + 1] - samples.tcp[k]
+    long_step = np.linalg.norm(step, axis=1) > ALPHA_MIN_STEP_MM
+    chord = np.where(long_step[:, None], unit(step), samples.tangent[k])
+    status = ev.status.copy()
+    extrude = samples.extrude[k] & long_step
+    off = ~alpha_allowed(reach.cell, alpha_of(T[:, :3, 2], chord), extrude)
+    status[off & (status == OK)] = ALPHA
     new_samples = Samples(
         tcp=np.insert(samples.tcp, at, between(samples.tcp), axis=0),
         normal=np.insert(samples.normal, at, unit(between(samples.normal)), axis=0),
-        tangent=np.insert(samples.tangent, at, samples.tangent[k], axis=0),
+        tangent=np.insert(samples.tangent, at, chord, axis=0),
         waypoint=np.insert(samples.waypoint, at, -1),
         extrude=np.insert(samples.extrude, at, samples.extrude[k]),
         speed=np.insert(samples.speed, at, between(samples.speed)),
         height=np.insert(samples.height, at, between(samples.height)),
+        arrive=np.insert(samples.arrive, at, np.where(extrude[:, None], chord, 0.0), axis=0),
     )
     o = orient
     new_orient = Orientation(
         q=np.insert(o.q, at, sub.q, axis=0), axis=np.insert(o.axis, at, T[:, :3, 2], axis=0),
         psi=np.insert(o.psi, at, between(o.psi)), tilt=np.insert(o.tilt, at, between(o.tilt)),
         lean=np.insert(o.lean, at, between(o.lean)),
-        status=np.insert(o.status, at, ev.status).astype(np.int8),
+        status=np.insert(o.status, at, status).astype(np.int8),
         pair=np.insert(o.pair, at, ev.pair).astype(np.int32),
         clearance=np.insert(o.clearance, at, ev.clearance),
     )
@@ -513,6 +562,7 @@ def _with_moves(reach: Reach, samples: Samples, orient: Orientation, entry: Safe
         speed=cat(va, samples.speed, vb),
         height=cat(np.full(n_a, samples.height[0]), samples.height,
                    np.full(n_b, samples.height[-1])),
+        arrive=cat(np.zeros((n_a, 3)), samples.arrive, np.zeros((n_b, 3))),
     )
     o = orient
     new_orient = Orientation(

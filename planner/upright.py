@@ -72,7 +72,7 @@ def _margin(reach: Reach, tcp: np.ndarray, normal: np.ndarray) -> np.ndarray:
 
 
 def upright(reach: Reach, tcp: np.ndarray, normal: np.ndarray, tangent: np.ndarray,
-            extrude: np.ndarray) -> Upright:
+            extrude: np.ndarray, arrive: np.ndarray | None = None) -> Upright:
     """Printing directions turned towards vertical where the margin is thin (module docstring).
 
     Args:
@@ -80,6 +80,8 @@ def upright(reach: Reach, tcp: np.ndarray, normal: np.ndarray, tangent: np.ndarr
         normal: (M, 3) float64, unit printing directions in the base frame.
         tangent: (M, 3) float64, unit motion directions in the base frame.
         extrude: (M,) bool; alpha limits apply to extruding samples only.
+        arrive: (M, 3) float64, unit direction of the depositing step arriving at each sample,
+            zero rows where it does not deposit (alpha holds against it too), or None.
     """
     cell = reach.cell
     M = len(tcp)
@@ -101,6 +103,9 @@ def upright(reach: Reach, tcp: np.ndarray, normal: np.ndarray, tangent: np.ndarr
             n2 = turn_towards(normal[idx], up, a)
             m2 = _margin(reach, tcp[idx], n2)
             allowed = alpha_allowed(cell, alpha_of(-n2, tangent[idx]), extrude[idx])
+            if arrive is not None:
+                has = np.linalg.norm(arrive[idx], axis=1) > 0.5
+                allowed &= alpha_allowed(cell, alpha_of(-n2, arrive[idx]), has)
             better = allowed & (m2 > best[rows])
             best[rows[better]] = m2[better]
             best_angle[rows[better]] = a[better]

@@ -77,7 +77,7 @@ def test_samples_failing_between_waypoints_are_named_with_their_reason(
     z = np.zeros((M, 3))
     samples = Samples(tcp=z, normal=z, tangent=z,
                       waypoint=np.array([0, -1, -1, 1, -1, 2], np.int32),
-                      extrude=np.ones(M, bool), speed=np.ones(M), height=np.ones(M))
+                      extrude=np.ones(M, bool), speed=np.ones(M), height=np.ones(M), arrive=z)
     status = np.full(M, OK, np.int8)
     status[[2, 4]] = COLLISION
     pair = np.full(M, -1, np.int32)

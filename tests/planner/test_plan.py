@@ -10,10 +10,11 @@ import pytest
 from mesp_cell.cli import main
 from planner import kinematics as kin
 from planner.cell import CellConfig
-from planner.plan import PlanResult
+from planner.plan import PlanResult, plan
 from planner.trajectory import Trajectory
 from slicer.report import read_report
 from slicer.stages import Toolpath
+from tests.planner import synthetic
 
 
 def test_trajectory_reaches_every_waypoint(dome_plan: PlanResult, dome_tp: Toolpath) -> None:
@@ -89,3 +90,36 @@ def test_mesp_plan_fails_with_one_line_when_the_plan_is_not_executable(
     assert len(err) == 1 and err[0].startswith("mesp: error: the plan cannot be executed")
     assert "unreachable entry" in err[0] and "Traceback" not in err[0]
     assert (tmp_path / "trajectory.npz").is_file()  # kept for inspection
+
+
+def _alpha_at_both_ends(result: PlanResult) -> np.ndarray:
+    """alpha (deg) of every depositing step, against its chord, at its first and last sample."""
+    tr = result.trajectory
+    tool = tr.tool_T.copy()
+    tool[:3, 3] /= 1000.0
+    axis = kin.fk(tr.q, tool)[:, :3, 2]
+    chord = np.diff(tr.tcp, axis=0)
+    length = np.linalg.norm(chord, axis=1)
+    dep = tr.extrude[:-1] & (length > 1e-6)
+    c = chord[dep] / length[dep, None]
+    ends = np.concatenate([np.einsum("ij,ij->i", axis[:-1][dep], c),
+                           np.einsum("ij,ij->i", axis[1:][dep], c)])
+    return np.degrees(np.arccos(np.clip(ends, -1.0, 1.0)))
+
+
+def test_alpha_holds_along_a_step_that_climbs_out_of_the_layer(cell: CellConfig) -> None:
+    # a flat line whose one step climbs 0.6 mm over 0.9 mm (a connection to another height):
+    # against that step's direction the nozzle on -normal sits at alpha 124 deg. Both ends of
+    # the step must be tilted, not only the waypoint where the step starts (the central
+    # difference at the far end averages the climb with the flat step after it)
+    x = np.arange(0.0, 20.0, 0.9)
+    z = np.where(x > 10.0, 0.6, 0.0)
+    pos = np.column_stack([x, np.zeros_like(x), z])
+    tp = synthetic.make_toolpath(pos, np.tile([0.0, 0.0, 1.0], (len(x), 1)),
+                                 np.zeros(len(x)))
+    result = plan(tp, cell)
+    assert result.status == "ok"
+    alpha = _alpha_at_both_ends(result)
+    assert alpha.max() > 100.0  # the climb needed a tilt
+    assert alpha.min() >= cell.planning.alpha_min_deg - 1e-6
+    assert alpha.max() <= cell.planning.alpha_max_deg + 1e-6
