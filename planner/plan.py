@@ -334,7 +334,8 @@ def plan(
             offset = (x, y, cell.placement.offset_mm[2])
             alt = replace(placement, model_T=model_transform(cell, box, np.array(offset), yaw),
                           offset_mm=offset, yaw_deg=yaw, clearance_mm=clear)
-            again = _plan_placed(toolpath, reach, alt, timer, repaired, smoothed)
+            again = _plan_placed(toolpath, reach, alt, timer, repaired, smoothed,
+                                 f" (yaw {yaw:g})")
             again.report["placement"]["replanned"] = tries
             if not _blocked(again):
                 return again
@@ -352,26 +353,27 @@ def _blocked(result: PlanResult) -> bool:
 
 
 def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: StageTimer,
-                 repaired: np.ndarray, smoothed: np.ndarray) -> PlanResult:
-    """The stages after the placement (module docstring), for one placement."""
+                 repaired: np.ndarray, smoothed: np.ndarray, tag: str = "") -> PlanResult:
+    """The stages after the placement (module docstring), for one placement; ``tag`` follows
+    the stage names (a re-plan's stages are told apart from the first plan's)."""
     cell = reach.cell
-    with timer.stage("resample"):
+    with timer.stage("resample" + tag):
         samples = resample(toolpath, placement.model_T, cell)
-    with timer.stage("upright"):
+    with timer.stage("upright" + tag):
         up = upright(reach, samples.tcp, samples.normal, samples.tangent, samples.extrude,
                      samples.arrive)
-    with timer.stage("orientation"):
+    with timer.stage("orientation" + tag):
         orient = choose(reach, samples.tcp, up.normal, samples.tangent, samples.extrude,
                         arrive=samples.arrive)
-    with timer.stage("continuity"):
+    with timer.stage("continuity" + tag):
         samples, orient, split = _continuous(reach, samples, orient)
-    with timer.stage("entry"):
+    with timer.stage("entry" + tag):
         # home -> above the first sample -> plunge along its nozzle axis; the mirror at the end
         heights = safe_heights(reach)
         entry = safe_move(reach, reach.home, orient.q[0], heights)
         leave = safe_move(reach, orient.q[-1], reach.home, heights)
         samples, orient, part, corner = _with_moves(reach, samples, orient, entry, leave)
-    with timer.stage("velocity"):
+    with timer.stage("velocity" + tag):
         q = orient.q
         T_tcp = kin.fk(q, reach.tool_m)
         tcp = T_tcp[:, :3, 3] * 1000.0
@@ -390,13 +392,13 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
         stop = np.zeros(len(q), dtype=bool)
         stop[np.flatnonzero(part == 1)[[0, -1]]] = True
         stop |= corner
-    with timer.stage("timing"):
+    with timer.stage("timing" + tag):
         vmax = np.radians(cell.robot.max_velocity_deg_s)
         amax = np.radians(cell.robot.max_acceleration_deg_s2)
         timing = expand_timing(
             time_law(q[keep], dq, tcp[keep], s, samples.speed[keep], vmax, amax,
                      stop=stop[keep]), keep)
-    with timer.stage("report"):
+    with timer.stage("report" + tag):
         alpha = np.degrees(alpha_of(axis, samples.tangent))
         traj = Trajectory(
             t=timing.t, q=q, qd=timing.qd, tcp=tcp, waypoint=samples.waypoint, alpha=alpha,
