@@ -1,7 +1,8 @@
 """Trajectory streaming at the servo rate: resampling, pre-motion checks, the servo loop.
 
 ``StreamPlan.load`` reads ``trajectory.npz`` (by path and sha256), refuses a bad one with a
-one-line reason before anything moves, and resamples it to the servo period. ``ServoStream``
+one-line reason before anything moves, and streams it at the servo period (each servo sample
+interpolated when it is sent). ``ServoStream``
 sends one servoJ per period inside initPeriod/waitPeriod, asks a guard before every sample
 (the robot node's interlocks: extruder alive and running, e-stop, supervisor present), reports
 every deposition waypoint it passes, and ends with servoStop.
@@ -16,6 +17,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -23,6 +25,7 @@ from mesp_cell.drivers.robot_base import UR5E_Q_LIMIT, UR5E_QD_LIMIT, RobotDrive
 from slicer.artifacts import load_npz
 from slicer.errors import InputError
 
+MAX_PERIODS = 1 << 20  # servo periods a stream keeps for its jitter statistics (~35 min at 500 Hz)
 SWING_LIMIT_MM = 0.5  # a depositing step may bow off the straight step by this much at most
 TRAJECTORY_SCHEMA = {
     "t": (1, "f", None), "q": (2, "f", (6,)), "qd": (2, "f", (6,)), "tcp": (2, "f", (3,)),
@@ -40,14 +43,87 @@ def sha256_of(path: Path) -> str:
     return h.hexdigest()
 
 
+class ServoJoints:
+    """Joint targets of a ``StreamPlan`` at its servo samples, interpolated on demand.
+
+    Index it like a (K, 6) float64 array (rad): an int, a slice or an int array.
+    ``np.asarray`` builds the whole array (small plans and tests only).
+    """
+
+    def __init__(self, plan: StreamPlan) -> None:
+        self._plan = plan
+
+    def __len__(self) -> int:
+        return self._plan.samples
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self._plan.samples, 6)
+
+    def __getitem__(self, key: int | slice | np.ndarray) -> np.ndarray:
+        k = _indices(key, self._plan.samples)
+        t, q = self._plan.t, self._plan.q_knots
+        tk = self._plan.dt * k
+        i = np.clip(np.searchsorted(t, tk, side="right") - 1, 0, len(t) - 2)
+        w = np.clip((tk - t[i]) / (t[i + 1] - t[i]), 0.0, 1.0)
+        out = q[i] + np.asarray(w)[..., None] * (q[i + 1] - q[i])
+        return out
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        out = self[:]
+        return out if dtype is None else out.astype(dtype)
+
+
+class ServoExtrude:
+    """Deposition flags of a ``StreamPlan`` at its servo samples: a sample deposits where the
+    trajectory sample at or before it does. Index it like a (K,) bool array."""
+
+    def __init__(self, plan: StreamPlan) -> None:
+        self._plan = plan
+
+    def __len__(self) -> int:
+        return self._plan.samples
+
+    @property
+    def shape(self) -> tuple[int]:
+        return (self._plan.samples,)
+
+    def __getitem__(self, key: int | slice | np.ndarray) -> np.ndarray:
+        k = _indices(key, self._plan.samples)
+        src = np.clip(np.searchsorted(self._plan.t, self._plan.dt * k, side="right") - 1, 0,
+                      len(self._plan.t) - 1)
+        out = self._plan.extrude_knots[src]
+        return out
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        out = self[:]
+        return out if dtype is None else out.astype(dtype)
+
+
+def _indices(key: int | slice | np.ndarray, K: int) -> np.ndarray:
+    """Servo sample indices (int64) for an int, slice or int array key into K samples."""
+    if isinstance(key, slice):
+        return np.arange(*key.indices(K), dtype=np.int64)
+    k = np.asarray(key, dtype=np.int64)
+    if np.any((k < -K) | (k >= K)):
+        raise IndexError(f"servo sample index out of range for {K} samples")
+    return np.where(k < 0, k + K, k)
+
+
 @dataclass(frozen=True)
 class StreamPlan:
-    """A trajectory resampled to the servo period.
+    """A trajectory streamed at the servo period: servo sample k is the trajectory at
+    t[0] + k dt, interpolated linearly in joint space when it is asked for (``q[k]``).
+
+    Why on demand: a 30 h job (the socket) has 53 M servo samples; as arrays they took 2.5 GB
+    of joint targets, 5.7 GB while building them and 16 s to load, in the robot node and the
+    supervisor each.
 
     Attributes:
         dt: s, servo period.
-        q: (K, 6) float64, rad, joint targets, one per servo period.
-        extrude: (K,) bool, deposition at this sample.
+        t: (M,) float64, s, trajectory sample times from the first (strictly increasing).
+        q_knots: (M, 6) float64, rad, trajectory joint positions.
+        extrude_knots: (M,) bool, deposition on the step after each trajectory sample.
         wp_id: (W,) int64, toolpath waypoint indices in the order they are reached.
         wp_sample: (W,) int64, servo sample at which each is reached (non-decreasing).
         wp_extrude: (W,) bool, the waypoint deposits material.
@@ -57,8 +133,9 @@ class StreamPlan:
     """
 
     dt: float
-    q: np.ndarray
-    extrude: np.ndarray
+    t: np.ndarray
+    q_knots: np.ndarray
+    extrude_knots: np.ndarray
     wp_id: np.ndarray
     wp_sample: np.ndarray
     wp_extrude: np.ndarray
@@ -68,7 +145,18 @@ class StreamPlan:
 
     @property
     def samples(self) -> int:
-        return int(self.q.shape[0])
+        """K: servo samples from the first trajectory sample to the last."""
+        return int(np.floor(self.t[-1] / self.dt + 1e-9)) + 1
+
+    @property
+    def q(self) -> ServoJoints:
+        """(K, 6) joint targets, rad, one per servo period (computed when indexed)."""
+        return ServoJoints(self)
+
+    @property
+    def extrude(self) -> ServoExtrude:
+        """(K,) deposition flags, one per servo period (computed when indexed)."""
+        return ServoExtrude(self)
 
     def sample_of_waypoint(self, waypoint: int) -> int:
         """Servo sample at which ``waypoint`` is reached (0 for -1 = from the start)."""
@@ -78,6 +166,47 @@ class StreamPlan:
         if i >= len(self.wp_id) or self.wp_id[i] != waypoint:
             raise InputError(f"waypoint {waypoint} is not in the trajectory", "check the job")
         return int(self.wp_sample[i])
+
+    def q_at(self, k: int) -> np.ndarray:
+        """(6,) joint targets, rad, of servo sample ``k`` (0 <= k < samples): the streaming
+        loop's fast path."""
+        t = self.t
+        tk = self.dt * k
+        i = min(max(int(np.searchsorted(t, tk, side="right")) - 1, 0), len(t) - 2)
+        w = min(max((tk - t[i]) / (t[i + 1] - t[i]), 0.0), 1.0)
+        return self.q_knots[i] + w * (self.q_knots[i + 1] - self.q_knots[i])
+
+    def extrude_at(self, k: int) -> bool:
+        """Whether servo sample ``k`` (0 <= k < samples) deposits."""
+        i = int(np.searchsorted(self.t, self.dt * k, side="right")) - 1
+        return bool(self.extrude_knots[min(max(i, 0), len(self.t) - 1)])
+
+    def first_extruding(self) -> int:
+        """The first servo sample that deposits (``samples`` if none does)."""
+        knots = np.flatnonzero(self.extrude_knots)
+        if not len(knots):
+            return self.samples
+        # the first servo sample at or after each depositing trajectory sample
+        k = np.ceil(self.t[knots] / self.dt - 1e-9).astype(np.int64)
+        k = k[k < self.samples]
+        if not len(k):
+            return self.samples
+        hit = np.flatnonzero(self.extrude[k])
+        return int(k[hit[0]]) if len(hit) else self.samples
+
+    @staticmethod
+    def of_path(dt: float, t: np.ndarray, q: np.ndarray, tool_T: np.ndarray,
+                hold_s: float = 0.0) -> StreamPlan:
+        """A plan that moves along a timed joint path (``t``: (M,) s from 0, increasing;
+        ``q``: (M, 6) rad) without depositing, then holds its end for ``hold_s``."""
+        t = np.asarray(t, dtype=np.float64)
+        q = np.asarray(q, dtype=np.float64)
+        if hold_s > 0:
+            t = np.append(t, t[-1] + hold_s)
+            q = np.vstack([q, q[-1:]])
+        empty = np.zeros(0, dtype=np.int64)
+        return StreamPlan(dt, t - t[0], q, np.zeros(len(t), bool), empty, empty,
+                          np.zeros(0, bool), empty, 0, np.asarray(tool_T, dtype=np.float64))
 
     @staticmethod
     def load(path: Path, dt: float, sha256: str = "") -> StreamPlan:
@@ -125,14 +254,11 @@ class StreamPlan:
         if np.any(np.diff(wp[has]) <= 0):
             raise InputError(f"{path}: waypoint indices are not increasing in time",
                              "re-plan the job")
-        # Resample to the servo period: sample k is at t0 + k dt.
-        K = int(np.floor((t[-1] - t[0]) / dt + 1e-9)) + 1
-        tk = t[0] + dt * np.arange(K)
-        qk = np.stack([np.interp(tk, t, q[:, j]) for j in range(6)], axis=1)
-        src = np.clip(np.searchsorted(t, tk, side="right") - 1, 0, M - 1)
-        extrude_k = ex[src]
+        # servo sample k is at t0 + k dt (interpolated when streamed, see the class)
+        t = t - t[0]
+        K = int(np.floor(t[-1] / dt + 1e-9)) + 1
         wp_id = wp[has]
-        wp_sample = np.minimum(np.ceil((t[has] - t[0]) / dt - 1e-9).astype(np.int64), K - 1)
+        wp_sample = np.minimum(np.ceil(t[has] / dt - 1e-9).astype(np.int64), K - 1)
         wp_layer = np.full(wp_id.shape, -1, dtype=np.int64)
         layers = 0
         tp = path.parent / "toolpath.npz"
@@ -146,7 +272,7 @@ class StreamPlan:
                                  "re-plan the job")
             wp_layer = toolpath.layer[wp_id].astype(np.int64)
             layers = int(toolpath.layer.max()) + 1 if toolpath.layer.size else 0
-        return StreamPlan(dt, qk, extrude_k, wp_id, wp_sample, ex[has], wp_layer, layers,
+        return StreamPlan(dt, t, q, ex, wp_id, wp_sample, ex[has], wp_layer, layers,
                           np.asarray(a["tool_T"], dtype=np.float64))
 
 
@@ -157,7 +283,8 @@ class StreamResult:
     Attributes:
         done: the last sample was sent. reason: why it stopped early ("" if done).
         last_sample: last sample sent (-1 if none). stop_t: time.time() of servoStop.
-        periods: (n,) float64, s, measured servo periods (for the jitter benchmark).
+        periods: (n,) float64, s, measured servo periods, oldest first (for the jitter
+            benchmark; the last MAX_PERIODS of a longer stream).
     """
 
     done: bool
@@ -224,14 +351,15 @@ class ServoStream:
     def _run(self) -> StreamResult:
         d, plan = self.driver, self.plan
         K = plan.samples
-        periods = np.zeros(K - self.start)
+        # the last MAX_PERIODS servo periods (a ring: a 30 h stream has 53 M of them)
+        periods = np.zeros(min(K - self.start, MAX_PERIODS))
         n, prev, reason = 0, 0.0, ""
         wp_sample, wp_extrude = plan.wp_sample, plan.wp_extrude
         overrun = float(getattr(d.servo, "overrun_s", 0.1))  # wall time, even on a fast twin
         for k in range(self.start, K):  # one iteration per servo period (500 Hz real time)
             t0 = d.init_period()
             if n:
-                periods[n - 1] = t0 - prev
+                periods[(n - 1) % len(periods)] = t0 - prev
                 if t0 - prev > overrun:
                     reason = f"servo loop stalled for {1000 * (t0 - prev):.0f} ms (watchdog)"
                     break
@@ -244,7 +372,7 @@ class ServoStream:
             if why:
                 reason = why
                 break
-            if not d.servo_j(plan.q[k]):
+            if not d.servo_j(plan.q_at(k)):
                 reason = ("protective stop" if d.protective_stopped()
                           else "servoJ refused: link to the controller lost")
                 break
@@ -258,4 +386,7 @@ class ServoStream:
         d.servo_stop()
         stop_t = time.time()
         done = not reason
-        return StreamResult(done, reason, self.sample, stop_t, periods[: max(n - 1, 0)])
+        m = max(n - 1, 0)
+        if m > len(periods):  # unroll the ring: oldest first
+            periods = np.roll(periods, -(m % len(periods)))
+        return StreamResult(done, reason, self.sample, stop_t, periods[: min(m, len(periods))])

@@ -100,12 +100,49 @@ def must_run_mask(extrude: np.ndarray, lead_n: int, margin_n: int, start: int) -
         extrude: (K,) bool. Returns (K,) bool.
     """
     K = extrude.shape[0]
-    idx = np.arange(K)
-    cmd_on = extrude[np.minimum(idx + lead_n, K - 1)]
+    return _must_run(extrude, np.arange(K), K, lead_n, margin_n, start, -1)[0]
+
+
+def _must_run(extrude: Any, idx: np.ndarray, K: int, lead_n: int, margin_n: int, start: int,
+              last_off_before: int) -> tuple[np.ndarray, int]:
+    """``must_run_mask`` at the consecutive samples ``idx`` of K, given the last "off" sample
+    before them (-1: none); returns the mask and the last "off" sample up to ``idx[-1]``.
+    ``extrude`` is indexable with an int array (a (K,) bool array or ``ServoExtrude``)."""
+    ext = np.asarray(extrude[idx], dtype=bool)
+    cmd_on = np.asarray(extrude[np.minimum(idx + lead_n, K - 1)], dtype=bool)
     off = ~cmd_on & (idx >= start)
-    last_off = np.maximum.accumulate(np.where(off, idx, -1))  # last "off" sample at or before k
+    # last "off" sample at or before k
+    last_off = np.maximum(np.maximum.accumulate(np.where(off, idx, -1)), last_off_before)
     settled = (last_off < start) | (idx - last_off - 1 >= margin_n)
-    return np.asarray(extrude & cmd_on & settled)
+    return ext & cmd_on & settled, int(last_off[-1]) if len(idx) else last_off_before
+
+
+class MustRun:
+    """``must_run_mask`` of a stream from ``start``, computed a chunk of samples at a time as
+    the stream asks for them (a whole long job's mask would hold tens of millions of
+    samples). Call it with non-decreasing sample indices >= ``start``."""
+
+    CHUNK = 1 << 16
+
+    def __init__(self, extrude: Any, lead_n: int, margin_n: int, start: int) -> None:
+        self.extrude, self.K = extrude, len(extrude)
+        self.lead_n, self.margin_n, self.start = lead_n, margin_n, start
+        self.c0 = start
+        self.mask = np.zeros(0, dtype=bool)
+        self.last_off = -1
+
+    def __call__(self, k: int) -> bool:
+        if k < self.c0:
+            raise ValueError(f"sample {k} before the stream's window at {self.c0}")
+        while k >= self.c0 + len(self.mask):
+            c0 = self.c0 + len(self.mask)
+            idx = np.arange(c0, min(c0 + self.CHUNK, self.K), dtype=np.int64)
+            if not len(idx):
+                raise IndexError(f"sample {k} beyond the {self.K} samples")
+            self.mask, self.last_off = _must_run(self.extrude, idx, self.K, self.lead_n,
+                                                 self.margin_n, self.start, self.last_off)
+            self.c0 = c0
+        return bool(self.mask[k - self.c0])
 
 
 class RobotNode(LifecycleNode):
@@ -197,8 +234,8 @@ class RobotNode(LifecycleNode):
 
     # -- interlocks ------------------------------------------------------------------------
     def _guard_factory(self, plan: StreamPlan, start: int, lead_s: float) -> Any:
-        must = must_run_mask(plan.extrude, self._lead_samples(lead_s, plan),
-                             self._latency_samples(self.margin_s, plan), start)
+        must = MustRun(plan.extrude, self._lead_samples(lead_s, plan),
+                       self._latency_samples(self.margin_s, plan), start)
 
         def guard(k: int) -> str:
             if self.estopped:
@@ -207,7 +244,7 @@ class RobotNode(LifecycleNode):
                 return f"{self.extruder_name} process lost"
             if self.supervisor_name not in self.alive:
                 return f"{self.supervisor_name} process lost"
-            if must[k]:
+            if must(k):
                 ext, age = self._ext, time.monotonic() - self._ext_t
                 if age > self.max_age:
                     self.max_age = age
@@ -297,14 +334,9 @@ class RobotNode(LifecycleNode):
         timing = entry.time_move(reach, move)
         dt = self.servo.dt
         # hold the target a little at the end: the servo (lookahead) settles onto it
-        hold = int(np.ceil(max(0.2, 2.0 * self.servo.lookahead_s) / dt))
-        K = int(np.floor(timing.t[-1] / dt + 1e-9)) + 1 + hold
-        tk = np.minimum(dt * np.arange(K), timing.t[-1])
-        qk = np.stack([np.interp(tk, timing.t, move.q[:, j]) for j in range(6)], axis=1)
-        empty = np.zeros(0, dtype=np.int64)
+        hold = np.ceil(max(0.2, 2.0 * self.servo.lookahead_s) / dt) * dt
         tool_T = self.plan.tool_T if self.plan is not None else self.cell.tool.tool_T
-        return StreamPlan(dt, qk, np.zeros(K, bool), empty, empty, np.zeros(0, bool), empty,
-                          0, tool_T), ""
+        return StreamPlan.of_path(dt, timing.t, move.q, tool_T, hold), ""
 
     def _start_move(self, cmd: Command) -> Reply:
         to = cmd.arg("to", "home")
@@ -316,7 +348,7 @@ class RobotNode(LifecycleNode):
             k = int(cmd.arg("sample", 0))
             if not 0 <= k < self.plan.samples:
                 return Reply.refuse(f"sample {k} outside the trajectory")
-            target = self.plan.q[k]
+            target = self.plan.q_at(k)
         else:
             return Reply.refuse(f"unknown move target '{to}'")
         path, why = self._safe_path(np.asarray(target, dtype=float))
@@ -372,15 +404,19 @@ class RobotNode(LifecycleNode):
             return END if k >= end else full_guard(k)
 
         lead_n = self._lead_samples(lead_s, plan)
-        # switch only for samples this stream sends (the part after ``end`` comes later)
-        cmd_on = plan.extrude[np.minimum(np.arange(K) + lead_n, end - 1)]
-        switched = {"on": bool(cmd_on[start])}
+
+        def cmd_on(k: int) -> bool:
+            # switch only for samples this stream sends (the part after ``end`` comes later)
+            return plan.extrude_at(min(k + lead_n, end - 1))
+
+        switched = {"on": cmd_on(start)}
 
         def on_sample(k: int) -> None:
             # Lead compensation on the servo clock: switch lead_n samples ahead.
-            if bool(cmd_on[k]) != switched["on"]:
-                switched["on"] = bool(cmd_on[k])
-                self._switches.put(("start" if switched["on"] else "stop", rate))
+            on = cmd_on(k)
+            if on != switched["on"]:
+                switched["on"] = on
+                self._switches.put(("start" if on else "stop", rate))
 
         why = guard(start)
         if why:

@@ -23,8 +23,6 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from mesp_cell.drivers.stream import StreamPlan, sha256_of
 from mesp_cell.jobs import JobRecord, JobStore
 from mesp_cell.messages import (
@@ -239,7 +237,7 @@ class SupervisorNode(LifecycleNode):
             # the robot node moves on a checked safe path: out of the gel along the nozzle
             # axis, above it, and into it along the target sample's axis (sample 0 is home)
             self._move(job.id, to="sample", sample=start)
-            first = int(np.argmax(plan.extrude)) if plan.extrude.any() else plan.samples
+            first = plan.first_extruding()
             if start < first:
                 # the planned entry (home -> plunge to the first waypoint) deposits nothing:
                 # stream it, then lead and prime at rest at the first deposition sample
@@ -252,7 +250,7 @@ class SupervisorNode(LifecycleNode):
             # Starting acknowledges a latched watchdog/stall fault (e.g. left by a killed
             # extruder node); an e-stop is only cleared by the operator (`mesp estop --reset`).
             self._extruder("clear")
-            on = bool(plan.extrude[min(start + lead_n, plan.samples - 1)])
+            on = plan.extrude_at(min(start + lead_n, plan.samples - 1))
             if on:
                 self._extruder("start", rate=self.rate)
                 # Lead and prime run on the extruder's (the twin's) clock; the switch-on must

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import tracemalloc
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,7 @@ import pytest
 from mesp_cell.drivers.robot_base import ServoConfig, ur5e_flange
 from mesp_cell.drivers.robot_twin import KinematicTwin
 from mesp_cell.drivers.stream import ServoStream, StreamPlan, sha256_of
-from mesp_cell.nodes.robot_node import must_run_mask
+from mesp_cell.nodes.robot_node import MustRun, must_run_mask
 from slicer.artifacts import save_npz
 from slicer.errors import InputError
 from tests.mesp_cell import synthetic
@@ -262,3 +263,73 @@ def test_robot_node_moves_into_the_gel_only_along_the_nozzle_axis(tmp_path: Path
         assert path is None and why == ""
     finally:
         node.on_shutdown()
+
+
+def _reference_resampling(a: dict[str, np.ndarray], dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Every servo sample built at once, as the streamer did before it interpolated on demand."""
+    t = a["t"] - a["t"][0]
+    K = int(np.floor(t[-1] / dt + 1e-9)) + 1
+    tk = dt * np.arange(K)
+    q = np.stack([np.interp(tk, t, a["q"][:, j]) for j in range(6)], axis=1)
+    src = np.clip(np.searchsorted(t, tk, side="right") - 1, 0, len(t) - 1)
+    return q, a["extrude"][src]
+
+
+def test_servo_samples_on_demand_equal_the_whole_resampling(job: Path) -> None:
+    dt = 0.0023  # not a divisor of the trajectory's sample period
+    plan = StreamPlan.load(job / "trajectory.npz", dt)
+    arrays = synthetic.trajectory_arrays(N_WP)
+    q, extrude = _reference_resampling(arrays, dt)
+    assert plan.samples == len(q) == len(plan.q) == len(plan.extrude)
+    assert np.allclose(np.asarray(plan.q), q, atol=1e-12)
+    assert np.array_equal(np.asarray(plan.extrude), extrude)
+    ks = [0, 1, 7, len(q) // 2, len(q) - 1]
+    assert all(np.allclose(plan.q_at(k), q[k], atol=1e-12) for k in ks)
+    assert all(plan.extrude_at(k) == extrude[k] for k in ks)
+    assert np.allclose(plan.q[-1], q[-1]) and np.allclose(plan.q[3:40:6], q[3:40:6])
+    assert plan.first_extruding() == int(np.argmax(extrude))
+    with pytest.raises(IndexError):
+        plan.q[len(q)]
+
+
+def test_must_run_chunk_by_chunk_equals_the_whole_mask(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(MustRun, "CHUNK", 7)
+    rng = np.random.default_rng(5)
+    for trial in range(40):
+        K = int(rng.integers(5, 120))
+        extrude = np.repeat(rng.random(K // 3 + 1) < 0.6, 3)[:K]
+        lead_n, margin_n = int(rng.integers(0, 5)), int(rng.integers(0, 6))
+        start = int(rng.integers(0, K))
+        whole = must_run_mask(extrude, lead_n, margin_n, start)
+        must = MustRun(extrude, lead_n, margin_n, start)
+        got = [must(k) for k in range(start, K)]
+        assert np.array_equal(got, whole[start:]), trial
+    must = MustRun(np.ones(30, bool), 1, 1, 0)
+    must(10)
+    with pytest.raises(ValueError):  # a stream only moves forward
+        must(0)
+
+
+def test_a_thirty_hour_job_loads_without_building_its_servo_samples(tmp_path: Path) -> None:
+    # 30 h at 500 Hz: 54 M servo samples (2.6 GB of joint targets as an array)
+    M = 200_000
+    t = np.linspace(0.0, 30 * 3600.0, M)
+    s = np.sin(2 * np.pi * t / t[-1])[:, None]
+    q = synthetic.HOME + 0.15 * s * np.array([1.0, 0.5, -0.5, 0.3, 0.2, 0.1])
+    wp = np.arange(M, dtype=np.int32)
+    save_npz(tmp_path / "trajectory.npz", {
+        "t": t, "q": q, "qd": np.gradient(q, t, axis=0), "tcp": np.zeros((M, 3)), "waypoint": wp,
+        "alpha": np.full(M, 90.0), "extrude": np.ones(M, bool), "base_T": np.eye(4),
+        "tool_T": np.eye(4), "model_T": np.eye(4)})
+    tracemalloc.start()
+    start = time.perf_counter()
+    plan = StreamPlan.load(tmp_path / "trajectory.npz", 0.002)
+    seconds = time.perf_counter() - start
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    assert plan.samples == 54_000_001
+    assert peak < 200e6 and seconds < 5.0  # the whole array alone would be 2.6 GB
+    k = plan.samples - 12_345
+    assert np.allclose(plan.q_at(k), [np.interp(k * 0.002, t, q[:, j]) for j in range(6)])
+    must = MustRun(plan.extrude, 25, 50, k)
+    assert all(must(i) for i in range(k + 50, k + 100))
