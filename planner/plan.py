@@ -298,6 +298,9 @@ def _stats(x: np.ndarray) -> dict[str, float]:
             "p95": float(p[2]), "max": float(x.max()), "mean": float(x.mean())}
 
 
+REPLANS = 4  # placements tried after the best one where its entry or exit is blocked
+
+
 def plan(
     toolpath: Toolpath, cell: CellConfig, progress: Progress | None = None,
     placement: Placement | None = None,
@@ -341,9 +344,6 @@ def plan(
                 return again
         result.report["placement"]["replanned"] = tries
     return result
-
-
-REPLANS = 4  # placements tried after the best one where its entry or exit is blocked
 
 
 def _blocked(result: PlanResult) -> bool:
