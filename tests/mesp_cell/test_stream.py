@@ -322,13 +322,11 @@ def test_a_thirty_hour_job_loads_without_building_its_servo_samples(tmp_path: Pa
         "alpha": np.full(M, 90.0), "extrude": np.ones(M, bool), "base_T": np.eye(4),
         "tool_T": np.eye(4), "model_T": np.eye(4)})
     tracemalloc.start()
-    start = time.perf_counter()
     plan = StreamPlan.load(tmp_path / "trajectory.npz", 0.002)
-    seconds = time.perf_counter() - start
     _, peak = tracemalloc.get_traced_memory()
     tracemalloc.stop()
     assert plan.samples == 54_000_001
-    assert peak < 200e6 and seconds < 5.0  # the whole array alone would be 2.6 GB
+    assert peak < 200e6  # the joint targets as an array alone would be 2.6 GB
     k = plan.samples - 12_345
     assert np.allclose(plan.q_at(k), [np.interp(k * 0.002, t, q[:, j]) for j in range(6)])
     must = MustRun(plan.extrude, 25, 50, k)
