@@ -255,6 +255,18 @@ def alpha_allowed(cell: CellConfig, alpha: np.ndarray, extrude: np.ndarray) -> n
     return ~extrude | ((alpha >= lo - 1e-9) & (alpha <= hi + 1e-9))
 
 
+def alpha_within(cell: CellConfig, axis: np.ndarray, leave: np.ndarray, extrude: np.ndarray,
+                 arrive: np.ndarray | None) -> np.ndarray:
+    """(N,) bool: nozzle ``axis`` (N, 3) keeps alpha within range against the step leaving
+    each sample (``leave``, where ``extrude``) and the depositing step arriving at it
+    (``arrive``: (N, 3), zero rows where none deposits; None: not checked)."""
+    ok = alpha_allowed(cell, alpha_of(axis, leave), extrude)
+    if arrive is not None:
+        has = np.linalg.norm(arrive, axis=1) > 0.5
+        ok &= alpha_allowed(cell, alpha_of(axis, arrive), has)
+    return ok
+
+
 def _viterbi(cost: np.ndarray, grid: np.ndarray, weight: float) -> np.ndarray:
     """Cheapest state sequence: node cost (S, K) plus weight * (wrapped spin change)^2."""
     S, K = cost.shape
@@ -316,13 +328,11 @@ def choose(
     """
     cell = reach.cell
     M = len(tcp)
-    arriving = (np.zeros((M, 3)) if arrive is None else np.asarray(arrive, dtype=float))
-    has_arrive = np.linalg.norm(arriving, axis=1) > 0.5
 
     def allowed(ax: np.ndarray, rows: np.ndarray) -> np.ndarray:
         """(len(rows),) bool: alpha within range against the leaving and arriving steps."""
-        return (alpha_allowed(cell, alpha_of(ax, tangent[rows]), extrude[rows])
-                & alpha_allowed(cell, alpha_of(ax, arriving[rows]), has_arrive[rows]))
+        return alpha_within(cell, ax, tangent[rows], extrude[rows],
+                            None if arrive is None else arrive[rows])
 
     K = cell.planning.spin_steps
     grid = np.linspace(-np.pi, np.pi, K, endpoint=False)

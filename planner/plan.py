@@ -60,7 +60,7 @@ from planner.timing import (  # noqa: F401  (path_parameter: re-exported)
     time_law,
 )
 from planner.trajectory import Trajectory
-from planner.upright import COMFORT, Upright, upright
+from planner.upright import COMFORT, Upright, turn_towards, upright
 from slicer.errors import InputError
 from slicer.progress import Progress, StageTimer
 from slicer.stages import Toolpath
@@ -244,16 +244,7 @@ def smooth_normals(toolpath: Toolpath, k: int, max_deg: float) -> tuple[Toolpath
     hi = np.minimum(idx + k, last_rev)
     S = np.concatenate([np.zeros((1, 3)), np.cumsum(n, axis=0)])
     m = unit((S[hi + 1] - S[lo]) / (hi - lo + 1)[:, None])
-    cos = np.clip(np.einsum("ij,ij->i", m, n), -1.0, 1.0)
-    ang = np.arccos(cos)
-    cap = np.radians(max_deg)
-    # slerp from n towards m, stopping at the cap
-    f = np.where(ang > cap, cap / np.maximum(ang, 1e-12), 1.0)
-    sin = np.sin(ang)
-    ok = sin > 1e-9
-    w0 = np.where(ok, np.sin((1 - f) * ang) / np.where(ok, sin, 1.0), 1.0 - f)
-    w1 = np.where(ok, np.sin(f * ang) / np.where(ok, sin, 1.0), f)
-    out = unit(w0[:, None] * n + w1[:, None] * m)
+    out = turn_towards(n, m, np.radians(max_deg))  # towards the mean, at most the cap
     # only where the normal turns fast (faster than TURN_DEG_PER_MM over the window)
     P = toolpath.position
     span = np.linalg.norm(P[hi] - P[lo], axis=1)

@@ -32,7 +32,7 @@ from typing import NamedTuple
 import numpy as np
 
 from planner import kinematics as kin
-from planner.orientation import Reach, alpha_allowed, alpha_of, ramp, tool_rotation, unit
+from planner.orientation import Reach, alpha_within, ramp, tool_rotation, unit
 
 COMFORT = 0.2  # singularity margin (0 singular, ~1 far) below which the nozzle is uprighted
 STEP_DEG = 5.0  # candidate upright angles: STEP_DEG, 2 STEP_DEG, ... upright_max_deg
@@ -52,16 +52,19 @@ class Upright(NamedTuple):
     margin: np.ndarray
 
 
-def turn_towards(normal: np.ndarray, up: np.ndarray, angle: np.ndarray) -> np.ndarray:
-    """Unit directions ``normal`` (M, 3) turned towards the unit vector ``up`` (3,) by
-    ``angle`` (M,) rad, stopping at ``up``."""
-    theta = np.arccos(np.clip(normal @ up, -1.0, 1.0))
+def turn_towards(normal: np.ndarray, target: np.ndarray, angle: np.ndarray | float
+                 ) -> np.ndarray:
+    """Unit directions ``normal`` (M, 3) turned towards the unit vectors ``target`` ((3,) or
+    (M, 3)) by ``angle`` ((M,) or scalar) rad along the great circle, stopping at the target
+    (a target opposite to or on the normal leaves it)."""
+    target = np.broadcast_to(target, normal.shape)
+    theta = np.arccos(np.clip(np.einsum("ij,ij->i", normal, target), -1.0, 1.0))
     a = np.minimum(angle, theta)
     s = np.sin(theta)
     ok = s > 1e-9
     w0 = np.where(ok, np.sin(theta - a) / np.where(ok, s, 1.0), 1.0)
     w1 = np.where(ok, np.sin(a) / np.where(ok, s, 1.0), 0.0)
-    return unit(w0[:, None] * normal + w1[:, None] * up[None, :])
+    return unit(w0[:, None] * normal + w1[:, None] * target)
 
 
 def _margin(reach: Reach, tcp: np.ndarray, normal: np.ndarray) -> np.ndarray:
@@ -102,10 +105,8 @@ def upright(reach: Reach, tcp: np.ndarray, normal: np.ndarray, tangent: np.ndarr
             a = np.full(len(idx), np.radians(k * STEP_DEG))
             n2 = turn_towards(normal[idx], up, a)
             m2 = _margin(reach, tcp[idx], n2)
-            allowed = alpha_allowed(cell, alpha_of(-n2, tangent[idx]), extrude[idx])
-            if arrive is not None:
-                has = np.linalg.norm(arrive[idx], axis=1) > 0.5
-                allowed &= alpha_allowed(cell, alpha_of(-n2, arrive[idx]), has)
+            allowed = alpha_within(cell, -n2, tangent[idx], extrude[idx],
+                                   None if arrive is None else arrive[idx])
             better = allowed & (m2 > best[rows])
             best[rows[better]] = m2[better]
             best_angle[rows[better]] = a[better]
