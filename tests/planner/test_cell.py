@@ -35,6 +35,7 @@ def test_override_merges_with_default(tmp_path: Path) -> None:
         ("[tool]\nnozle_length_mm = 3.0\n", "cell.tool.nozle_length_mm"),
         ("[robot]\nhome_deg = [0, 0, 500, 0, 0, 0]\n", "home_deg"),
         ("[planning]\nalpha_min_deg = 95.0\n", "alpha"),
+        ("[planning]\nupright_max_deg = 60.0\n", "upright_max_deg"),
     ],
 )
 def test_bad_values_name_the_key(tmp_path: Path, text: str, needle: str) -> None:
