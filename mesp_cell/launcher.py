@@ -452,20 +452,30 @@ class CellClient:
 
     def wait(self, job_id: str, on_progress: Callable[[JobRecord], None] | None = None,
              timeout: float = 3600.0, poll_s: float = 0.2,
-             until: frozenset[str] = FINAL | {"paused", "interrupted"}) -> JobRecord:
+             until: frozenset[str] = FINAL | {"paused", "interrupted"},
+             idle: bool = False) -> JobRecord:
         """Wait until the job reaches a state in ``until``, reporting progress as it goes.
 
         A paused or interrupted job whose resume is pending does not count as stopped.
+        ``timeout`` counts from the call, or with ``idle`` from the job's last change (a new
+        state or checkpoint), so a long print that advances is followed to its end.
+
+        Raises:
+            TimeoutError: ``timeout`` s passed (without a change, with ``idle``).
         """
         end = time.monotonic() + timeout
         job = self.store.get(job_id)
         while job.state not in until or job.resume:
             if time.monotonic() > end:
-                raise TimeoutError(f"job {job_id} still {job.state} after {timeout:g} s")
+                how = "without progress" if idle else "in all"
+                raise TimeoutError(f"job {job_id} still {job.state} after {timeout:g} s {how}")
             if on_progress is not None:
                 on_progress(job)
             time.sleep(poll_s)
+            seen = job.updated
             job = self.store.get(job_id)
+            if idle and job.updated != seen:
+                end = time.monotonic() + timeout
         if on_progress is not None:
             on_progress(job)
         return job

@@ -43,7 +43,8 @@ def register(sub: Any) -> None:
         help="the twin runs this many times faster than real time (default 40)",
     )
     p.add_argument("--no-inspect", action="store_true", help="skip the virtual print")
-    p.add_argument("--timeout", type=float, default=900.0, help="give up after this many s")
+    p.add_argument("--timeout", type=float, default=900.0,
+                   help="give up after this many s without progress (default 900)")
     p.set_defaults(func=run)
 
 
@@ -75,7 +76,13 @@ def run(args: argparse.Namespace) -> int:
         try:
             job = client.submit(model, job_file=job_file)
             say.line(f"submitted job {job.id}")
-            done = client.wait(job.id, on_progress=say.progress, timeout=args.timeout)
+            try:
+                done = client.wait(job.id, on_progress=say.progress, timeout=args.timeout,
+                                   idle=True)
+            except TimeoutError as exc:
+                say.end_progress()
+                raise InputError(str(exc), f"give it longer (--timeout; cell logs in "
+                                 f"{home / 'logs'})") from exc
         finally:
             client.close()
     say.end_progress()

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import threading
+import time
 from pathlib import Path
 
 import pytest
 
 from mesp_cell.jobs import JobStore, check_submission
+from mesp_cell.launcher import CellClient
 from slicer.errors import InputError
 
 
@@ -92,3 +95,42 @@ def test_submission_checks(model: Path, tmp_path: Path) -> None:
     job.write_text("[nonsense]\nx = 1\n")
     with pytest.raises(InputError, match="nonsense"):
         check_submission(model, job_file=job)
+
+
+def test_waiting_without_progress_times_out_but_a_print_that_advances_does_not(
+        model: Path, tmp_path: Path) -> None:
+    client = CellClient("sim", None, tmp_path)  # store only: no cell needed to wait
+
+    def printing() -> str:
+        job = client.submit(model)
+        for state in ("sliced", "planned", "printing"):
+            client.store.transition(job.id, state)
+        return job.id
+
+    def advance(job_id: str) -> threading.Thread:
+        def run() -> None:  # a checkpoint every 0.05 s for 1.2 s, then the end
+            other = JobStore(tmp_path / "jobs.sqlite")
+            for k in range(24):
+                time.sleep(0.05)
+                other.checkpoint(job_id, 0, k, 100 * (k + 1))
+            other.transition(job_id, "done")
+            other.close()
+        worker = threading.Thread(target=run)
+        worker.start()
+        return worker
+
+    stalled = printing()
+    with pytest.raises(TimeoutError, match="without progress"):
+        client.wait(stalled, timeout=0.5, poll_s=0.02, idle=True)
+    # the same advancing print: 0.5 s in all is too short, 0.5 s without progress is not
+    job_id = printing()
+    worker = advance(job_id)
+    with pytest.raises(TimeoutError, match="in all"):
+        client.wait(job_id, timeout=0.5, poll_s=0.02)
+    worker.join()
+    job_id = printing()
+    worker = advance(job_id)
+    done = client.wait(job_id, timeout=0.5, poll_s=0.02, idle=True)
+    worker.join()
+    assert done.state == "done" and done.waypoint == 23
+    client.close()
