@@ -43,61 +43,55 @@ def sha256_of(path: Path) -> str:
     return h.hexdigest()
 
 
-class ServoJoints:
-    """Joint targets of a ``StreamPlan`` at its servo samples, interpolated on demand.
-
-    Index it like a (K, 6) float64 array (rad): an int, a slice or an int array.
-    ``np.asarray`` builds the whole array (small plans and tests only).
-    """
+class _ServoView:
+    """Per-servo-sample values of a ``StreamPlan``, computed when indexed (an int, a slice or
+    an int array, like an array of ``shape``); ``np.asarray`` builds them all (small plans
+    and tests only)."""
 
     def __init__(self, plan: StreamPlan) -> None:
         self._plan = plan
 
     def __len__(self) -> int:
         return self._plan.samples
+
+    def __getitem__(self, key: int | slice | np.ndarray) -> np.ndarray:
+        return self._at(_indices(key, self._plan.samples))
+
+    def _at(self, k: np.ndarray) -> np.ndarray:
+        raise NotImplementedError  # each view says what a sample holds
+
+    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
+        out = self[:]
+        return out if dtype is None else out.astype(dtype)
+
+
+class ServoJoints(_ServoView):
+    """Joint targets, rad, at the servo samples: (K, 6) float64, interpolated linearly."""
 
     @property
     def shape(self) -> tuple[int, int]:
         return (self._plan.samples, 6)
 
-    def __getitem__(self, key: int | slice | np.ndarray) -> np.ndarray:
-        k = _indices(key, self._plan.samples)
+    def _at(self, k: np.ndarray) -> np.ndarray:
         t, q = self._plan.t, self._plan.q_knots
         tk = self._plan.dt * k
         i = np.clip(np.searchsorted(t, tk, side="right") - 1, 0, len(t) - 2)
         w = np.clip((tk - t[i]) / (t[i + 1] - t[i]), 0.0, 1.0)
-        out = q[i] + np.asarray(w)[..., None] * (q[i + 1] - q[i])
-        return out
-
-    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
-        out = self[:]
-        return out if dtype is None else out.astype(dtype)
+        return q[i] + np.asarray(w)[..., None] * (q[i + 1] - q[i])
 
 
-class ServoExtrude:
-    """Deposition flags of a ``StreamPlan`` at its servo samples: a sample deposits where the
-    trajectory sample at or before it does. Index it like a (K,) bool array."""
-
-    def __init__(self, plan: StreamPlan) -> None:
-        self._plan = plan
-
-    def __len__(self) -> int:
-        return self._plan.samples
+class ServoExtrude(_ServoView):
+    """Deposition flags at the servo samples: (K,) bool; a sample deposits where the
+    trajectory sample at or before it does."""
 
     @property
     def shape(self) -> tuple[int]:
         return (self._plan.samples,)
 
-    def __getitem__(self, key: int | slice | np.ndarray) -> np.ndarray:
-        k = _indices(key, self._plan.samples)
-        src = np.clip(np.searchsorted(self._plan.t, self._plan.dt * k, side="right") - 1, 0,
-                      len(self._plan.t) - 1)
-        out = self._plan.extrude_knots[src]
-        return out
-
-    def __array__(self, dtype: Any = None, copy: Any = None) -> np.ndarray:
-        out = self[:]
-        return out if dtype is None else out.astype(dtype)
+    def _at(self, k: np.ndarray) -> np.ndarray:
+        t = self._plan.t
+        src = np.clip(np.searchsorted(t, self._plan.dt * k, side="right") - 1, 0, len(t) - 1)
+        return self._plan.extrude_knots[src]
 
 
 def _indices(key: int | slice | np.ndarray, K: int) -> np.ndarray:
