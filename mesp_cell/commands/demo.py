@@ -94,12 +94,33 @@ def run(args: argparse.Namespace) -> int:
     job_dir = Path(done.dir)
     say.line(
         f"printed {done.id}: {done.layers} layers, {done.waypoints} waypoints, "
-        f"{done.volume:.0f} mm^3 extruded, in {elapsed:.0f} s wall time"
+        f"{done.volume:.0f} mm^3 extruded{_against_toolpath(job_dir, done.volume)}, "
+        f"in {elapsed:.0f} s wall time"
     )
     if not args.no_inspect:
         _inspect(job_dir)
     _summary(job_dir)
     return 0
+
+
+#: The extruded volume may differ from the toolpath's by the lead and the priming purge; beyond
+#: this the print was not what the toolpath asked for.
+VOLUME_TOLERANCE = 0.02
+
+
+def _against_toolpath(job_dir: Path, extruded: float) -> str:
+    """`` (+0.6% of the toolpath's 16692)``, with a warning line where it is off by more than
+    ``VOLUME_TOLERANCE``."""
+    from slicer.report import read_report
+
+    deposited = float(read_report(job_dir).get("toolpath", {}).get("deposited_volume_mm3", 0.0))
+    if deposited <= 0:
+        return ""
+    off = extruded / deposited - 1.0
+    if abs(off) > VOLUME_TOLERANCE:
+        print(f"mesp demo: warning: the extruder delivered {100 * off:+.1f}% of the toolpath's "
+              f"volume; see the extruder and robot logs", file=sys.stderr)
+    return f" ({100 * off:+.1f}% of the toolpath's {deposited:.0f})"
 
 
 def _inspect(job_dir: Path) -> None:

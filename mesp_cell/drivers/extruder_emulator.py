@@ -21,6 +21,7 @@ from typing import Any
 
 from mesp_cell.drivers import registers as R
 from mesp_cell.drivers.extruder_plant import ExtruderPlant, PlantParams
+from mesp_cell.drivers.sim_clock import SimClock
 
 
 def free_port(host: str = "127.0.0.1") -> int:
@@ -34,8 +35,8 @@ class ModbusEmulator:
     """The emulator's asyncio server; ``run()`` serves until ``stop()``."""
 
     def __init__(self, params: PlantParams, host: str = "127.0.0.1", port: int = 0,
-                 cycle_s: float = 0.005) -> None:
-        self.plant = ExtruderPlant(params, time.monotonic())
+                 cycle_s: float = 0.005, clock: SimClock | None = None) -> None:
+        self.plant = ExtruderPlant(params, time.monotonic(), clock)
         self.host = host
         self.port = port or free_port(host)
         self.cycle_s = cycle_s
@@ -176,13 +177,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--gain", type=float, default=1.0, help="hidden true/nominal rate ratio")
     ap.add_argument("--watchdog", type=float, default=0.5, help="host watchdog, s (0 = off)")
     ap.add_argument("--time-scale", type=float, default=1.0,
-                    help="the flow and totaliser run this many times faster than real time "
-                         "(the simulated cell's clock, shared with the robot twin)")
+                    help="the flow and totaliser run this many times faster than real time")
+    ap.add_argument("--clock", default="",
+                    help="file of the simulated cell's clock, shared with the robot twin (it "
+                         "pauses the flow while the twin lags); reset at start")
     args = ap.parse_args(argv)
     logging.getLogger("pymodbus").setLevel(logging.ERROR)
+    if not args.time_scale > 0:
+        ap.error(f"--time-scale {args.time_scale} must be > 0")
     emu = ModbusEmulator(PlantParams(tau_s=args.tau, gain=args.gain, watchdog_s=args.watchdog,
                                      time_scale=args.time_scale),
-                         host=args.host, port=args.port)
+                         host=args.host, port=args.port,
+                         clock=SimClock(args.time_scale, args.clock or None, reset=True))
 
     async def run() -> None:
         from mesp_cell.nodes.lifecycle import watch_parent

@@ -12,6 +12,7 @@ import math
 import threading
 from dataclasses import dataclass
 
+from mesp_cell.drivers.sim_clock import SimClock
 from mesp_cell.messages import FAULT_ESTOP, FAULT_STALL, FAULT_WATCHDOG
 
 
@@ -25,7 +26,8 @@ class PlantParams:
         max_rate: mm^3/s, set-points are clamped to [0, max_rate].
         watchdog_s: s, host heartbeat timeout while running (0 = off), wall-clock.
         time_scale: the flow and the totaliser run this many times faster than the wall clock
-            (the simulated cell's clock, shared with the robot twin; 1 = real time). The
+            (1 = real time). On the simulated cell they run on the clock the robot twin
+            shares (``sim_clock.SimClock``), which also pauses while the twin lags. The
             watchdog supervises the host link, so it stays on the wall clock.
     """
 
@@ -43,10 +45,16 @@ class PlantParams:
 
 class ExtruderPlant:
     """A thread-safe extruder model advanced by ``step(now)`` (``now`` in s, monotonic wall
-    clock; the flow advances ``time_scale`` times as fast)."""
+    clock). The flow advances on simulated time: ``clock.now(now)``, ``time_scale`` times
+    the wall clock less the time the twin paused it (default: a private clock, never paused).
+    """
 
-    def __init__(self, params: PlantParams, now: float) -> None:
+    def __init__(self, params: PlantParams, now: float, clock: SimClock | None = None) -> None:
+        if clock is not None and abs(clock.scale - params.time_scale) > 1e-9 * params.time_scale:
+            raise ValueError(f"clock scale {clock.scale} differs from time_scale "
+                             f"{params.time_scale}")
         self.params = params
+        self.clock = clock or SimClock(params.time_scale)
         self.watchdog_s = params.watchdog_s
         self.rate_set = 0.0
         self.rate = 0.0
@@ -58,14 +66,17 @@ class ExtruderPlant:
         self.cycles = 0
         self._host_hb = -1
         self._host_hb_t = now
-        self._t = now
+        self._sim_t = self.clock.now(now)  # s, simulated time the flow has reached
         self._lock = threading.Lock()
 
     def step(self, now: float) -> None:
         """Advance the flow and the totaliser to ``now`` (exact for a piecewise constant input)."""
         with self._lock:
-            dt = max(0.0, now - self._t) * self.params.time_scale  # simulated seconds
-            self._t = now
+            # Simulated seconds since the last step. The twin may pause the clock after this
+            # process read it, so simulated time can seem to step back: hold until it passes.
+            sim_now = self.clock.now(now)
+            dt = max(0.0, sim_now - self._sim_t)
+            self._sim_t = max(self._sim_t, sim_now)
             self.cycles = (self.cycles + 1) & 0xFFFF
             if self.running and self.watchdog_s > 0 and now - self._host_hb_t > self.watchdog_s:
                 self.running = False

@@ -3,8 +3,9 @@
 ``KinematicTwin`` integrates the commanded joint positions with a first-order servo response
 (time constant ``lookahead_s * 75 / gain``: 25 ms at the defaults, a model of servoJ's
 smoothing), clamped to the UR5e joint speed limit. ``MujocoTwin`` steps the MuJoCo model of
-``sim.twin`` (position + velocity actuators) instead. Both keep real time (scaled by
-``servo.time_scale``) in ``init_period``/``wait_period``, and both can be made to fail
+``sim.twin`` (position + velocity actuators) instead. Both keep simulated time (real time
+scaled by ``servo.time_scale``, on the clock they share with the emulated extruder,
+``sim_clock.SimClock``) in ``init_period``/``wait_period``, and both can be made to fail
 (protective stop, link loss) for the safety tests.
 """
 
@@ -16,19 +17,20 @@ import time
 import numpy as np
 
 from mesp_cell.drivers.robot_base import UR5E_QD_LIMIT, ServoConfig, ur5e_flange
+from mesp_cell.drivers.sim_clock import SimClock
 
 HOME_Q = np.deg2rad([0.0, -90.0, 90.0, -90.0, -90.0, 0.0])
 
 
 def precise_sleep_until(deadline: float) -> None:
-    """Sleep until ``time.perf_counter()`` reaches ``deadline``: coarse sleep, then a short spin.
+    """Sleep until ``time.monotonic()`` reaches ``deadline``: coarse sleep, then a short spin.
 
     The final 0.3 ms spins so the 500 Hz loop's period jitter stays well under 0.5 ms.
     """
-    remaining = deadline - time.perf_counter()
+    remaining = deadline - time.monotonic()
     if remaining > 0.0003:
         time.sleep(remaining - 0.0003)
-    while time.perf_counter() < deadline:
+    while time.monotonic() < deadline:
         pass
 
 
@@ -41,8 +43,13 @@ class KinematicTwin:
     """
 
     def __init__(self, servo: ServoConfig, q0: np.ndarray | None = None,
-                 tool_T: np.ndarray | None = None) -> None:
+                 tool_T: np.ndarray | None = None, clock: SimClock | None = None) -> None:
+        if clock is not None and abs(clock.scale - servo.time_scale) > 1e-9 * servo.time_scale:
+            raise ValueError(f"clock scale {clock.scale} differs from servo time_scale "
+                             f"{servo.time_scale}")
         self.servo = servo
+        self.clock = clock or SimClock(servo.time_scale)
+        self._sim: float | None = None  # s, simulated time of the current motion
         self.q = np.array(HOME_Q if q0 is None else q0, dtype=np.float64)
         self.qd = np.zeros(6)
         self.tool_T = np.eye(4) if tool_T is None else np.asarray(tool_T, dtype=np.float64)
@@ -51,7 +58,6 @@ class KinematicTwin:
         self._lock = threading.Lock()
         self.stop_times: list[float] = []  # time.time() of every servo_stop/stop_j
         self.commands = 0
-        self._due = 0.0  # perf_counter s, end of the current period of a fast twin
 
     # -- link ------------------------------------------------------------------------------
     def connect(self) -> None:
@@ -84,30 +90,38 @@ class KinematicTwin:
         """The twin dies with its process, so there is nothing to stop on a missed kick."""
 
     # -- timing ----------------------------------------------------------------------------
-    #: A period shorter than this (a fast twin) is not slept precisely: the loop runs ahead on
-    #: an absolute schedule and sleeps only once it is this far ahead, releasing the GIL and
-    #: the CPU instead of spinning (at 40x a period is 50 us, below the spin threshold, and a
-    #: spinning servo thread starved the node's bus callbacks and the other processes).
+    #: A period shorter than this (a fast twin) is not slept precisely: the loop runs ahead of
+    #: the clock and sleeps only once it is this far ahead, releasing the GIL and the CPU
+    #: instead of spinning (at 40x a period is 50 us, below the spin threshold, and a spinning
+    #: servo thread starved the node's bus callbacks and the other processes).
     BATCH_S = 0.001
-    #: Behind the schedule by more than this (the process was not scheduled), the twin does
-    #: not race to catch up: simulated time pauses instead.
-    CATCH_UP_S = 0.02
 
     def init_period(self) -> float:
-        return time.perf_counter()
+        return self.clock.wall()
 
     def wait_period(self, t_start: float) -> None:
-        period = self.servo.dt / self.servo.time_scale
-        if period >= self.BATCH_S:  # real time (or nearly): a precise period for low jitter
-            precise_sleep_until(t_start + period)
-            return
-        now = time.perf_counter()
-        due = self._due + period
-        if not now - self.CATCH_UP_S <= due <= now + self.BATCH_S + period:
-            due = t_start + period  # a new motion, or too far behind
-        self._due = due
-        if due - now > self.BATCH_S:
+        """End one servo period: the twin's simulated time advances by ``servo.dt``.
+
+        The period ends when the simulated clock reaches the twin's time. A twin behind the
+        clock (its loop cannot keep ``time_scale``) does not race to catch up: it pauses the
+        clock instead, so the extruder emulator's flow, counted on the same clock, waits for
+        the arm. Simulated time thus stays the twin's own ``periods x dt`` during a motion.
+        """
+        clock = self.clock
+        sim = clock.now(t_start) if self._sim is None else self._sim  # a motion starts now
+        self._sim = sim + self.servo.dt
+        due = clock.wall_at(self._sim)
+        now = clock.wall()
+        if now > due:
+            clock.pause(now - due)
+        elif self.servo.dt / self.servo.time_scale >= self.BATCH_S:
+            precise_sleep_until(due)  # real time (or nearly): a precise period, low jitter
+        elif due - now > self.BATCH_S:
             time.sleep(due - now)
+
+    def end_motion(self) -> None:
+        """The arm rests: simulated time runs with the clock until the next motion."""
+        self._sim = None
 
     # -- motion ----------------------------------------------------------------------------
     def _step(self, target: np.ndarray, dt: float) -> None:
@@ -129,6 +143,7 @@ class KinematicTwin:
         with self._lock:
             self.qd = np.zeros(6)
             self.stop_times.append(time.time())
+        self.end_motion()
 
     def stop_j(self) -> None:
         self.servo_stop()
@@ -143,13 +158,16 @@ class KinematicTwin:
         n = max(1, int(np.ceil(duration / self.servo.dt)))
         start = self.q.copy()
         s = 0.5 - 0.5 * np.cos(np.linspace(0.0, np.pi, n + 1)[1:])  # smooth in/out
-        for k in range(n):  # a loop over servo periods: each is one controller cycle
-            t0 = self.init_period()
-            if self._pstop or not self._connected:
-                return False
-            with self._lock:
-                self._place(start + s[k] * (target - start))
-            self.wait_period(t0)
+        try:
+            for k in range(n):  # a loop over servo periods: each is one controller cycle
+                t0 = self.init_period()
+                if self._pstop or not self._connected:
+                    return False
+                with self._lock:
+                    self._place(start + s[k] * (target - start))
+                self.wait_period(t0)
+        finally:
+            self.end_motion()
         with self._lock:
             self.qd = np.zeros(6)
         return True
@@ -176,13 +194,14 @@ class MujocoTwin(KinematicTwin):
     kinematic twin's; joints, speeds and the TCP are read from the simulation."""
 
     def __init__(self, servo: ServoConfig, q0: np.ndarray | None = None,
-                 tool_T: np.ndarray | None = None, cell_file: str | None = None) -> None:
+                 tool_T: np.ndarray | None = None, cell_file: str | None = None,
+                 clock: SimClock | None = None) -> None:
         from pathlib import Path
 
         from planner.cell import load_cell
         from sim.twin import Twin, mujoco
 
-        super().__init__(servo, q0=q0, tool_T=tool_T)
+        super().__init__(servo, q0=q0, tool_T=tool_T, clock=clock)
         self._mj = mujoco
         self.sim = Twin(load_cell(Path(cell_file) if cell_file else None))
         self.sim.set_q(self.q)
@@ -212,6 +231,7 @@ class MujocoTwin(KinematicTwin):
             self.sim.data.ctrl[6:12] = 0.0
             self.qd = np.zeros(6)
             self.stop_times.append(time.time())
+        self.end_motion()
 
     def tcp_mm(self) -> np.ndarray:
         with self._lock:  # the servo thread steps the same MjData
@@ -220,6 +240,7 @@ class MujocoTwin(KinematicTwin):
 
 
 def mujoco_twin(servo: ServoConfig, q0: np.ndarray | None = None,
-                tool_T: np.ndarray | None = None, cell_file: str | None = None) -> MujocoTwin:
+                tool_T: np.ndarray | None = None, cell_file: str | None = None,
+                clock: SimClock | None = None) -> MujocoTwin:
     """The MuJoCo backend (the cell file sets the model; None = the bundled cell)."""
-    return MujocoTwin(servo, q0=q0, tool_T=tool_T, cell_file=cell_file)
+    return MujocoTwin(servo, q0=q0, tool_T=tool_T, cell_file=cell_file, clock=clock)

@@ -65,14 +65,20 @@ def make_driver(params: dict[str, Any], servo: ServoConfig,
     """The driver named by ``params['backend']``: "twin" (default), "mujoco" or "ur5e"."""
     backend = params.get("backend", "twin")
     home, tool_T = home_and_tool(params, cell if cell is not None else cell_of(params))
+    if backend in ("twin", "mujoco"):
+        from mesp_cell.drivers.sim_clock import SimClock
+
+        # the simulated cell's clock, shared with the emulated extruder ("" = private)
+        clock = SimClock(servo.time_scale, params.get("sim_clock") or None)
     if backend == "twin":
         from mesp_cell.drivers.robot_twin import KinematicTwin
 
-        return KinematicTwin(servo, q0=home, tool_T=tool_T)
+        return KinematicTwin(servo, q0=home, tool_T=tool_T, clock=clock)
     if backend == "mujoco":
         from mesp_cell.drivers.robot_twin import mujoco_twin
 
-        return mujoco_twin(servo, q0=home, tool_T=tool_T, cell_file=cell_file_of(params))
+        return mujoco_twin(servo, q0=home, tool_T=tool_T, cell_file=cell_file_of(params),
+                           clock=clock)
     if backend == "ur5e":
         from mesp_cell.drivers.ur5e_rtde import UR5eRTDE
 
@@ -147,8 +153,9 @@ class MustRun:
 
 class RobotNode(LifecycleNode):
     """See the module docstring. Parameters: backend, host, servo (table), home_deg, tool_T,
-    state_hz (100), extruder (node name), supervisor (node name), extruder_fresh_s (0.05: max age
-    of the extruder state), switch_margin_s (0.1: time allowed for a switch-on to show)."""
+    sim_clock (twin backends: the clock file shared with the extruder emulator), state_hz
+    (100), extruder (node name), supervisor (node name), extruder_fresh_s (0.05: max age of the
+    extruder state), switch_margin_s (0.1: time allowed for a switch-on to show)."""
 
     def on_configure(self) -> None:
         p = self.params

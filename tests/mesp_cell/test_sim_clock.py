@@ -1,0 +1,93 @@
+"""The simulated cell's clock: shared between processes, paused by a lagging twin, and the
+emulated extruder's flow counted on it."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from mesp_cell.drivers import registers as R
+from mesp_cell.drivers.extruder_plant import ExtruderPlant, PlantParams
+from mesp_cell.drivers.robot_base import ServoConfig
+from mesp_cell.drivers.robot_twin import KinematicTwin
+from mesp_cell.drivers.sim_clock import SimClock
+from tests.mesp_cell import synthetic
+
+
+def test_a_shared_clock_is_seen_by_every_attached_reader(tmp_path: Path) -> None:
+    path = tmp_path / "run" / "sim.clock"
+    owner = SimClock(40.0, path, reset=True)
+    twin = SimClock(40.0, path)
+    twin.pause(0.25)
+    twin.pause(-1.0)  # never runs the clock forward
+    assert owner.paused() == pytest.approx(0.25)
+    assert owner.now(10.0) == pytest.approx(40.0 * 9.75)
+    assert owner.wall_at(owner.now(12.5)) == pytest.approx(12.5)
+    # A restarted twin attaches to the clock as it is; a new launch resets it.
+    assert SimClock(40.0, path).paused() == pytest.approx(0.25)
+    assert SimClock(40.0, path, reset=True).paused() == 0.0 == twin.paused()
+    assert SimClock(40.0).paused() == 0.0  # private
+    with pytest.raises(ValueError):
+        SimClock(0.0)
+
+
+class SlowTwin(KinematicTwin):
+    """A twin whose every servo period costs ``cost_s`` of wall time (MuJoCo on a loaded
+    host): far slower than its time scale asks."""
+
+    cost_s = 0.001
+
+    def _step(self, target: np.ndarray, dt: float) -> None:
+        time.sleep(self.cost_s)
+        super()._step(target, dt)
+
+
+def test_a_lagging_twin_pauses_the_extruders_clock(tmp_path: Path) -> None:
+    # 100x asks for 20 us per 2 ms period; the twin takes >= 1 ms. The extruder runs at a
+    # constant rate for the motion on the shared clock: its volume is the rate times the
+    # twin's own simulated time, not times 1000 x the wall time it took.
+    path = tmp_path / "sim.clock"
+    scale, rate, periods = 100.0, 6.0, 150
+    params = PlantParams(tau_s=1e-4, watchdog_s=0.0, time_scale=scale)  # flow at once
+    plant = ExtruderPlant(params, time.monotonic(), SimClock(scale, path, reset=True))
+    private = ExtruderPlant(params, time.monotonic())
+    twin = SlowTwin(ServoConfig(time_scale=scale), q0=synthetic.HOME,
+                    clock=SimClock(scale, path))
+    twin.connect()
+    for p in (plant, private):
+        p.set_rate(rate, time.monotonic())
+        p.command(R.CMD_RUN, time.monotonic())
+    volumes, w0 = [], time.monotonic()
+    for _ in range(periods + 2):
+        t0 = twin.init_period()
+        twin.servo_j(synthetic.HOME)
+        twin.wait_period(t0)
+        plant.step(time.monotonic())
+        private.step(time.monotonic())
+        volumes.append((plant.volume, private.volume))
+    twin.servo_stop()
+    wall = time.monotonic() - w0
+    simulated = periods * 0.002  # 0.3 s of motion after the first period
+    assert wall > 30 * simulated / scale  # the twin really lagged
+    assert twin.clock.paused() > 0.9 * wall
+    shared, old = np.subtract(volumes[-1], volumes[1])  # the first period warms up
+    # The plant reads the clock a few us after each period ends: at 100x, a few ms of flow.
+    assert shared == pytest.approx(rate * simulated, abs=rate * 0.004)
+    assert old > 10 * rate * simulated  # the old, private clock over-extrudes
+
+
+def test_an_idle_twin_lets_simulated_time_run(tmp_path: Path) -> None:
+    path = tmp_path / "sim.clock"
+    twin = KinematicTwin(ServoConfig(time_scale=100.0), q0=synthetic.HOME,
+                         clock=SimClock(100.0, path, reset=True))
+    twin.connect()
+    assert twin.move_j(synthetic.HOME + 0.01)
+    time.sleep(0.05)  # at rest: nothing to wait for
+    t0 = twin.clock.now()
+    time.sleep(0.05)
+    assert twin.clock.now() - t0 == pytest.approx(5.0, rel=0.2)
+    with pytest.raises(ValueError):  # a clock of another speed is a launch mistake
+        KinematicTwin(ServoConfig(time_scale=10.0), clock=SimClock(100.0))
