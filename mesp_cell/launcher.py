@@ -146,7 +146,23 @@ class _Proc:
 
 
 class LaunchFailed(RuntimeError):
-    """A critical process failed and was not restarted."""
+    """A critical process failed and was not restarted; ``fix`` says what to do."""
+
+    def __init__(self, message: str, fix: str = "read the process logs") -> None:
+        super().__init__(message)
+        self.fix = fix
+
+
+def start_error(log_text: str) -> tuple[str, str]:
+    """(reason, fix) from the last start-error line a node wrote to its log, or ("", "")."""
+    from mesp_cell.nodes.lifecycle import START_ERROR, START_FIX
+
+    for line in reversed(log_text.splitlines()):
+        at = line.find(START_ERROR)
+        if at >= 0:
+            reason, _, fix = line[at + len(START_ERROR):].partition(START_FIX)
+            return reason.strip(), fix.strip()
+    return "", ""
 
 
 class Launch:
@@ -235,14 +251,19 @@ class Launch:
         while time.monotonic() < end:
             assert proc.popen is not None
             if proc.popen.poll() is not None:
+                reason, fix = start_error(self._log_text(proc))
+                if reason:
+                    raise LaunchFailed(f"{s.name} cannot start: {reason}",
+                                       f"{fix} (log: {proc.log_path})")
                 raise LaunchFailed(f"{s.name} exited with code {proc.popen.returncode} while "
-                                   f"starting; see {proc.log_path}")
+                                   f"starting", f"read its log: {proc.log_path}")
             if s.params is not None and s.name in self.alive:
                 return
             if s.params is None and (not s.ready or s.ready in self._log_text(proc)):
                 return
             time.sleep(0.02)
-        raise LaunchFailed(f"{s.name} was not ready within {timeout:g} s; see {proc.log_path}")
+        raise LaunchFailed(f"{s.name} was not ready within {timeout:g} s",
+                           f"read its log: {proc.log_path}")
 
     @staticmethod
     def _log_text(proc: _Proc) -> str:

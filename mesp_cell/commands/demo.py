@@ -59,7 +59,7 @@ def _example(name: str) -> tuple[Path, Path | None]:
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo; returns 0 when the job printed completely."""
-    from mesp_cell.launcher import start_cell
+    from mesp_cell.launcher import LaunchFailed, start_cell
 
     if args.time_scale <= 0:
         raise InputError(f"--time-scale {args.time_scale}", "give a positive factor, e.g. 40")
@@ -70,7 +70,11 @@ def run(args: argparse.Namespace) -> int:
     say = _Printer()
     say.line(f"mesp demo: {model.name} on the simulated cell (state in {home})")
     t0 = time.monotonic()
-    with start_cell(overrides={"time_scale": args.time_scale}, on_event=say.event) as cell:
+    try:
+        cell = start_cell(overrides={"time_scale": args.time_scale}, on_event=say.event)
+    except LaunchFailed as exc:
+        raise InputError(str(exc), exc.fix) from exc
+    with cell:
         say.line(f"cell up in {time.monotonic() - t0:.1f} s: {', '.join(sorted(cell.alive))}")
         client = cell.client()
         try:

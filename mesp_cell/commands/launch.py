@@ -58,7 +58,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         launch.start()
     except LaunchFailed as exc:
-        raise InputError(str(exc), "read the process log") from exc
+        raise InputError(str(exc), exc.fix) from exc
     say(f"cell '{spec.cell}' running (bus hub {spec.hub}); logs in {launch.log_dir}; "
         "Ctrl-C stops it")
     # Ctrl-C and SIGTERM both stop the cell cleanly. Installed explicitly: a process started

@@ -55,6 +55,10 @@ class ServoConfig:
             raise ValueError("time_scale, move_speed and move_accel must be > 0")
 
 
+class RobotLinkError(RuntimeError):
+    """The robot controller does not answer (connect) or the link broke."""
+
+
 class RobotDriver(Protocol):
     """A 6-axis arm driven by servoJ at a fixed period."""
 

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from mesp_cell.drivers.robot_base import ServoConfig
+from mesp_cell.drivers.robot_base import RobotLinkError, ServoConfig
 
 
 class UR5eRTDE:
@@ -27,15 +27,27 @@ class UR5eRTDE:
         self._servoing = False
 
     def connect(self) -> None:
+        """Open both RTDE interfaces; ``RobotLinkError`` (nothing left open) if the controller
+        does not answer."""
         import rtde_control
         import rtde_receive
 
         freq = 1.0 / self.servo.dt
-        self._ctrl = rtde_control.RTDEControlInterface(self.host, freq)
-        self._recv = rtde_receive.RTDEReceiveInterface(self.host, freq)
-        self._ctrl.setTcp(_pose_from_T(self.tool_T))
-        # The controller stops the arm when this process stops kicking (crash, hang).
-        self._ctrl.setWatchdog(self.servo.watchdog_hz)
+        try:
+            self._ctrl = rtde_control.RTDEControlInterface(self.host, freq)
+            self._recv = rtde_receive.RTDEReceiveInterface(self.host, freq)
+            self._ctrl.setTcp(_pose_from_T(self.tool_T))
+            # The controller stops the arm when this process stops kicking (crash, hang).
+            self._ctrl.setWatchdog(self.servo.watchdog_hz)
+        except RuntimeError as exc:  # ur-rtde raises RuntimeError for every link failure
+            for iface in (self._ctrl, self._recv):
+                try:
+                    if iface is not None:
+                        iface.disconnect()
+                except RuntimeError:
+                    pass
+            self._ctrl = self._recv = None
+            raise RobotLinkError(f"no RTDE connection to the UR5e at {self.host} ({exc})") from exc
 
     def kick_watchdog(self) -> None:
         if self._ctrl is not None and self._ctrl.isConnected():

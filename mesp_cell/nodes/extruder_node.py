@@ -18,7 +18,7 @@ from typing import Any
 
 from mesp_cell.drivers.extruder_base import ExtruderDriver, ExtruderLinkError
 from mesp_cell.messages import FAULT_ESTOP, FAULT_LINK, Command, EStop, ExtruderState, Reply
-from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
+from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 
 log = logging.getLogger("mesp.extruder")
 
@@ -49,7 +49,12 @@ class ExtruderNode(LifecycleNode):
 
     def on_configure(self) -> None:
         p = self.params
-        self.driver = make_extruder(p)
+        try:
+            self.driver = make_extruder(p)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise NodeStartError(f"bad extruder parameters: {exc}",
+                                 "correct the extruder's [process.params] in the launch file "
+                                 "(driver modbus with host and port, or serial with url)") from exc
         self.robot_name = p.get("robot", "robot")
         self.supervisor_name = p.get("supervisor", "supervisor")
         self.period = 1.0 / float(p.get("state_hz", 100.0))

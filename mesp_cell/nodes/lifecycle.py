@@ -24,6 +24,22 @@ from mesp_cell.messages import Heartbeat
 
 log = logging.getLogger("mesp")
 
+#: A node that cannot start writes one line starting with this to its log; the launcher
+#: shows it (``launcher.start_error``) instead of "see the log".
+START_ERROR = "cannot start: "
+#: Separates the reason from the fix on that line.
+START_FIX = " | fix: "
+
+
+class NodeStartError(Exception):
+    """A node cannot start for a reason outside the program (a device that does not answer,
+    a bad parameter): one line for the operator, what is wrong and how to fix it."""
+
+    def __init__(self, reason: str, fix: str) -> None:
+        super().__init__(reason)
+        self.reason = reason
+        self.fix = fix
+
 
 class LifecycleNode:
     """Base class of a node process. Subclasses override the ``on_*`` hooks."""
@@ -42,7 +58,9 @@ class LifecycleNode:
 
     # -- hooks -----------------------------------------------------------------------------
     def on_configure(self) -> None:
-        """Open devices (the bus is already open)."""
+        """Open devices (the bus is already open). On failure it closes what it opened and
+        raises (``NodeStartError`` for the operator's mistakes); ``on_shutdown`` then does not
+        run."""
 
     def on_activate(self) -> None:
         """Start serving and publishing."""
@@ -76,7 +94,8 @@ class LifecycleNode:
         self.deactivate()
         self.stopping.set()
         try:
-            self.on_shutdown()
+            if self.state != "unconfigured":  # a failed configure released its own devices
+                self.on_shutdown()
         finally:
             if self.bus is not None:
                 self.bus.close()
@@ -113,6 +132,12 @@ class LifecycleNode:
             log.info("%s active (pid %d)", self.name, os.getpid())
             while not self.stopping.wait(0.2):
                 pass
+        except NodeStartError as exc:
+            log.error("%s%s%s%s", START_ERROR, exc.reason, START_FIX, exc.fix)
+            return 1
+        except Exception as exc:
+            log.exception("%s%s: %s", START_ERROR, type(exc).__name__, exc)
+            return 1
         finally:
             self.shutdown()
             log.info("%s finalized", self.name)

@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from mesp_cell.drivers.robot_base import RobotDriver, ServoConfig
+from mesp_cell.drivers.robot_base import RobotDriver, RobotLinkError, ServoConfig
 from mesp_cell.drivers.stream import ServoStream, StreamPlan, StreamResult
 from mesp_cell.messages import (
     Command,
@@ -37,8 +37,9 @@ from mesp_cell.messages import (
     StreamEvent,
     WaypointReached,
 )
-from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
+from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from planner.cell import CellConfig, load_cell
+from slicer.errors import InputError
 
 END = "\x00end"  # guard reason that ends a stream at its ``end`` sample (not a stop)
 
@@ -159,10 +160,21 @@ class RobotNode(LifecycleNode):
 
     def on_configure(self) -> None:
         p = self.params
-        self.servo = ServoConfig(**p.get("servo", {}))
-        self.cell = cell_of(p)
-        self.driver = make_driver(p, self.servo, self.cell)
-        self.driver.connect()
+        try:
+            self.servo = ServoConfig(**p.get("servo", {}))
+            self.cell = cell_of(p)
+            self.driver = make_driver(p, self.servo, self.cell)
+        except (TypeError, ValueError, InputError) as exc:
+            raise NodeStartError(f"bad robot parameters: {exc}",
+                                 "correct the robot's [process.params] in the launch file "
+                                 "(launch/sim.toml shows every key)") from exc
+        try:
+            self.driver.connect()
+        except RobotLinkError as exc:
+            host = p.get("host", "")
+            raise NodeStartError(str(exc), f"check that the robot at {host} is powered on, in "
+                                 "remote control, with RTDE enabled and reachable (ping "
+                                 f"{host}); or run the twin: mesp launch sim") from exc
         self.home, _ = home_and_tool(p, self.cell)
         self.reach: Any = None  # planner.orientation.Reach of the loaded job's gel level
         self.extruder_name = p.get("extruder", "extruder")

@@ -189,3 +189,25 @@ def test_both_launch_files_take_home_and_tool_from_the_cell(monkeypatch: pytest.
     # a launch override still wins
     over, _ = home_and_tool({"home_deg": [0.0, -90.0, 90.0, -90.0, -90.0, 0.0]}, cell)
     assert np.allclose(np.degrees(over), [0.0, -90.0, 90.0, -90.0, -90.0, 0.0])
+
+
+@pytest.mark.parametrize("params, reason, fix", [
+    # nothing listens for RTDE on this port of the loopback: the controller does not answer
+    ("backend = 'ur5e'\nhost = '127.0.0.1'\n", "no RTDE connection to the UR5e at 127.0.0.1",
+     "ping 127.0.0.1"),
+    ("backend = 'twin'\n[process.params.servo]\ngain = 5.0\n",
+     "bad robot parameters: servo gain 5.0 outside", "launch file"),
+])
+def test_a_node_that_cannot_start_says_why_in_one_line(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, params: str, reason: str,
+        fix: str) -> None:
+    monkeypatch.setenv("MESP_HOME", str(tmp_path))
+    path = tmp_path / "l.toml"
+    path.write_text("[cell]\nname = 'lonely'\n[[process]]\nname = 'robot'\n"
+                    "module = 'mesp_cell.nodes.robot_node'\n[process.params]\n" + params)
+    launch = Launch(load_launch(path), log_dir=tmp_path / "logs")
+    with pytest.raises(LaunchFailed, match=f"robot cannot start: {reason}") as caught:
+        launch.start(timeout=30)
+    assert fix in caught.value.fix and "robot.log" in caught.value.fix
+    log = (tmp_path / "logs" / "robot.log").read_text()
+    assert "Traceback" not in log  # the operator's mistake is one line, not a stack
