@@ -102,6 +102,9 @@ class ModelConfig:
         return UNIT_SCALE_MM[self.units]
 
 
+MAX_REFINE = 3  # red refinements after fTetWild (each multiplies the tets by 8)
+
+
 @dataclass(frozen=True)
 class MeshConfig:
     edge_length_mm: float = 1.2
@@ -109,8 +112,11 @@ class MeshConfig:
     stop_energy: float = 20.0
     optimize_iterations: int = 10
     coarsen: bool = False
+    refine: int | Literal["auto"] = "auto"
 
     def __post_init__(self) -> None:
+        if self.refine != "auto" and self.refine not in range(MAX_REFINE + 1):
+            raise ValueError(f"refine = {self.refine!r}, use \"auto\" or 0 to {MAX_REFINE}")
         if not 0.05 <= self.edge_length_mm <= 100.0:
             raise ValueError(f"edge_length_mm = {self.edge_length_mm}, use 0.05 to 100")
         if not 0 < self.epsilon < 0.1:

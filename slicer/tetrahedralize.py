@@ -1,7 +1,11 @@
 """Tetrahedralisation of a closed surface with fTetWild (pytetwild), and tet-mesh quality.
 
 ``tetrahedralize`` runs fTetWild with the ``[mesh]`` settings of the job, then orients every
-tet positively, drops unused vertices and measures the result (``TetStats``).
+tet positively, drops unused vertices and measures the result (``TetStats``). With
+``refine`` (default "auto": 1 for models of more than ~50k tets) fTetWild meshes at twice the
+edge length and every tet is split into 8 (``slicer.refine``), the new boundary vertices
+snapped onto the input surface: the socket's 251k tets in 26 s instead of ~170 s, at the same
+mean quality and closer to the surface.
 
 fTetWild meshes the whole bounding box and keeps the tets inside the surface (by winding
 number), so its cost follows the box, not the solid. ``grading`` can hand it a sizing field
@@ -38,6 +42,12 @@ MAX_BACKGROUND_TETS = 4e7
 # config has no ``grading`` key; 0 = fTetWild's uniform target (see the module docstring).
 DEFAULT_GRADING = 0.0
 
+# refine = "auto": one refinement where the direct mesh would have more tets than this (about
+# where fTetWild starts taking tens of seconds: aorta 98k tets 100 s, actuator 200k 39 s, cube
+# 7k 0.6 s). fTetWild makes ~9.5 tets per edge^3 of solid (socket: 239k at 2.95 mm).
+AUTO_REFINE_ABOVE = 50_000
+TETS_PER_EDGE3 = 9.5
+
 # A tet with a dihedral angle below this (deg) counts as a sliver in the statistics.
 SLIVER_DEG = 10.0
 
@@ -63,8 +73,12 @@ class TetStats:
         volume_mm3: total tet volume, mm^3.
         surface_volume_mm3: volume enclosed by the input surface, mm^3 (nan if unknown).
         volume_error: volume_mm3 / surface_volume_mm3 - 1.
-        seconds: wall-clock time of fTetWild, s.
+        seconds: wall-clock time of the whole tetrahedralisation (fTetWild and refinement), s.
         reoriented: tets whose vertex order was flipped to make them positive.
+        refinements: red refinements after fTetWild (``[mesh] refine``).
+        ftetwild_tets: tets fTetWild produced (before the refinements).
+        ftetwild_seconds: wall-clock time of fTetWild alone, s.
+        snapped_mm_max: mm, the largest move of a refined boundary vertex onto the surface.
     """
 
     tets: int
@@ -80,6 +94,10 @@ class TetStats:
     volume_error: float
     seconds: float
     reoriented: int = 0
+    refinements: int = 0
+    ftetwild_tets: int = 0
+    ftetwild_seconds: float = 0.0
+    snapped_mm_max: float = 0.0
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values for report.json (``mesh`` section)."""
@@ -218,6 +236,15 @@ def _grid_tets(counts: np.ndarray) -> np.ndarray:
     return tets.astype(np.int32)
 
 
+def refinements(config: MeshConfig, solid_volume_mm3: float) -> int:
+    """Red refinements after fTetWild: ``config.refine``, or for "auto" 1 where the direct
+    mesh would exceed ``AUTO_REFINE_ABOVE`` tets, else 0."""
+    if config.refine != "auto":
+        return int(config.refine)
+    estimated = TETS_PER_EDGE3 * solid_volume_mm3 / config.edge_length_mm**3
+    return 1 if estimated > AUTO_REFINE_ABOVE else 0
+
+
 def tetrahedralize(
     surface: Surface,
     config: MeshConfig,
@@ -245,16 +272,20 @@ def tetrahedralize(
     import pytetwild
 
     progress = progress if progress is not None else NullProgress()
-    edge = config.edge_length_mm
     box = np.prod(surface.vertices.max(axis=0) - surface.vertices.min(axis=0))
-    expected = BACKGROUND_TETS_PER_EDGE3 * box / edge**3
+    # (the final mesh is as large with refinements as without: the same limit)
+    expected = BACKGROUND_TETS_PER_EDGE3 * box / config.edge_length_mm**3
     if expected > MAX_BACKGROUND_TETS:
+        edge = config.edge_length_mm
         smallest = edge * (expected / MAX_BACKGROUND_TETS) ** (1 / 3)
         raise InputError(
             f"an edge length of {edge:g} mm would need about {expected / 1e6:.0f} M tets "
             f"for {surface.source.name}",
             f"use a larger --edge-length (at least {smallest:.2g} mm)",
         )
+    # With refinements, fTetWild meshes coarser and each refinement halves the edges.
+    n_refine = refinements(config, surface.volume_mm3)
+    edge = config.edge_length_mm * 2**n_refine
     if grading is None:
         grading = float(getattr(config, "grading", DEFAULT_GRADING))
     kwargs: dict[str, Any] = {}
@@ -291,13 +322,30 @@ def tetrahedralize(
     if tets.ndim != 2 or tets.shape[1] != 4 or len(tets) == 0:
         raise InputError(
             f"fTetWild produced no tets for {surface.source.name}",
-            "the solid may be thinner than the edge length: use a smaller --edge-length",
+            "the solid may be thinner than the edge length: use a smaller --edge-length"
+            + (" or [mesh] refine = 0" if n_refine else ""),
         )
     vertices, tets32 = compact(np.asarray(vertices, dtype=np.float64), tets)
     reoriented = int(np.count_nonzero(tet_volumes(vertices, tets32) < 0))
     tets32 = orient_positive(vertices, tets32)
+    coarse_tets, snapped = len(tets32), 0.0
+    for k in range(n_refine):
+        from slicer.refine import boundary_vertices, red_refine, snap_boundary
+
+        progress.update((k + 0.5) / (n_refine + 1),
+                        f"refinement {k + 1}/{n_refine} of {len(tets32)} tets")
+        n_old = len(vertices)
+        vertices, tets32 = red_refine(vertices, tets32)
+        new_boundary = boundary_vertices(tets32)
+        snap = snap_boundary(vertices, tets32, new_boundary[new_boundary >= n_old],
+                             surface.vertices, surface.faces)
+        vertices = snap.vertices
+        snapped = max(snapped, float(snap.moved_mm.max(initial=0.0)))
     mesh = TetMesh(vertices=vertices, tets=tets32)
     stats = quality(mesh.vertices, mesh.tets, surface.volume_mm3)
-    stats = TetStats(**{**stats.as_dict(), "seconds": seconds, "reoriented": reoriented})
+    stats = TetStats(**{**stats.as_dict(), "seconds": time.perf_counter() - start,
+                        "reoriented": reoriented, "refinements": n_refine,
+                        "ftetwild_tets": coarse_tets, "ftetwild_seconds": seconds,
+                        "snapped_mm_max": snapped})
     progress.update(1.0, f"{stats.tets} tets, {stats.vertices} vertices")
     return mesh, stats
