@@ -30,6 +30,12 @@ def test_a_shared_clock_is_seen_by_every_attached_reader(tmp_path: Path) -> None
     assert SimClock(40.0, path).paused() == pytest.approx(0.25)
     assert SimClock(40.0, path, reset=True).paused() == 0.0 == twin.paused()
     assert SimClock(40.0).paused() == 0.0  # private
+    # a writer killed mid-write (sequence left odd) does not hang its readers
+    import struct
+
+    with open(path, "r+b") as f:
+        f.write(struct.pack("<Q", 7))
+    assert owner.paused() == 0.0
     with pytest.raises(ValueError):
         SimClock(0.0)
 
