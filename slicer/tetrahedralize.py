@@ -293,7 +293,8 @@ def tetrahedralize(
         bg_vertices, bg_tets, bg_values = sizing_field(surface, edge, grading)
         kwargs = {"bg_vertices": bg_vertices, "bg_tets": bg_tets, "bg_values": bg_values}
     used = threads if threads > 0 else os.cpu_count() or 1
-    progress.update(0.0, f"fTetWild, target edge {edge:g} mm, {used} threads")
+    then = f", then {n_refine} refinement{'s' if n_refine > 1 else ''}" if n_refine else ""
+    progress.update(0.0, f"fTetWild, target edge {edge:g} mm, {used} threads{then}")
     start = time.perf_counter()
     # fTetWild drops debug files (__tracked_surface.stl, ...) into the working directory;
     # run it in a scratch directory so they never land in the user's (or a job) directory.
