@@ -91,9 +91,11 @@ def test_an_idle_twin_lets_simulated_time_run(tmp_path: Path) -> None:
                          clock=SimClock(100.0, path, reset=True))
     twin.connect()
     assert twin.move_j(synthetic.HOME + 0.01)
-    time.sleep(0.05)  # at rest: nothing to wait for
-    t0 = twin.clock.now()
-    time.sleep(0.05)
-    assert twin.clock.now() - t0 == pytest.approx(5.0, rel=0.2)
+    clock = twin.clock
+    paused, w0 = clock.paused(), clock.wall()
+    time.sleep(0.05)  # at rest: nothing pauses the clock
+    w1 = clock.wall()
+    assert clock.paused() == paused
+    assert clock.now(w1) - clock.now(w0) == pytest.approx(100.0 * (w1 - w0))
     with pytest.raises(ValueError):  # a clock of another speed is a launch mistake
         KinematicTwin(ServoConfig(time_scale=10.0), clock=SimClock(100.0))
