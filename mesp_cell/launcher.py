@@ -254,7 +254,8 @@ class Launch:
                 reason, fix = start_error(self._log_text(proc))
                 if reason:
                     raise LaunchFailed(f"{s.name} cannot start: {reason}",
-                                       f"{fix} (log: {proc.log_path})")
+                                       f"{fix} (log: {proc.log_path})" if fix
+                                       else f"read its log: {proc.log_path}")
                 raise LaunchFailed(f"{s.name} exited with code {proc.popen.returncode} while "
                                    f"starting", f"read its log: {proc.log_path}")
             if s.params is not None and s.name in self.alive:
