@@ -112,3 +112,37 @@ def test_auto_refines_large_models_only(tmp_path: Path) -> None:
     job.write_text("[mesh]\nrefine = \"twice\"\n")
     with pytest.raises(InputError, match="refine"):
         load_job(job)
+
+
+@pytest.mark.parametrize("coarse", ["fails", "misses the volume", "fine"])
+def test_auto_meshes_directly_where_the_refined_mesh_fails(
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path, coarse: str) -> None:
+    import slicer.tetrahedralize as T
+    from slicer.errors import InputError
+
+    sphere = trimesh.creation.icosphere(subdivisions=2, radius=24.0)
+    path = tmp_path / "ball.stl"
+    sphere.export(path)
+    surface = load_surface(path)
+    real = T.quality(REGULAR, np.array([[0, 1, 2, 3]]))
+    calls: list[int] = []
+
+    def fake_mesh(surface: object, config: MeshConfig, n_refine: int, *rest: object) -> tuple:
+        calls.append(n_refine)
+        if n_refine and coarse == "fails":
+            raise InputError("fTetWild produced no tets for ball.stl", "smaller edge")
+        error = 0.05 if n_refine and coarse == "misses the volume" else 0.001
+        return None, T.TetStats(**{**real.as_dict(), "volume_error": error,
+                                   "refinements": n_refine})
+
+    monkeypatch.setattr(T, "_mesh", fake_mesh)
+    _, stats = T.tetrahedralize(surface, MeshConfig(edge_length_mm=2.0))  # ~69k tets: auto 1
+    if coarse == "fine":
+        assert calls == [1] and not stats.refine_fallback
+    else:
+        assert calls == [1, 0] and stats.refine_fallback and stats.refinements == 0
+    calls.clear()
+    if coarse == "fails":  # an explicit refine is the user's choice: its failure is reported
+        with pytest.raises(InputError, match="no tets"):
+            T.tetrahedralize(surface, MeshConfig(edge_length_mm=2.0, refine=1))
+        assert calls == [1]
