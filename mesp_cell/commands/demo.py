@@ -103,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     )
     if not args.no_inspect:
         _inspect(job_dir)
-    _summary(job_dir)
+    _summary(job_dir, say.printing_s(), args.time_scale)
     return 0
 
 
@@ -134,7 +134,9 @@ def _inspect(job_dir: Path) -> None:
     inspect_args.func(inspect_args)
 
 
-def _summary(job_dir: Path) -> None:
+def _summary(job_dir: Path, printing_s: float = 0.0, time_scale: float = 0.0) -> None:
+    """The job's numbers; ``printing_s`` (wall s spent printing) gives the pace the twin kept
+    against the ``time_scale`` asked."""
     from slicer.report import read_report
 
     report = read_report(job_dir)
@@ -163,7 +165,13 @@ def _summary(job_dir: Path) -> None:
     )
     plan = report.get("plan", {})
     if plan:
-        rows.append(("trajectory", f"{plan.get('duration_s', float('nan')):.0f} s of printing"))
+        duration = float(plan.get("duration_s", float("nan")))
+        text = f"{duration:.0f} s of printing"
+        if printing_s > 0 and time_scale > 0 and duration > 0:
+            # the twin pauses the cell's clock when it cannot keep the pace asked for
+            text += (f", printed in {printing_s:.0f} s on the twin: {duration / printing_s:.0f}x "
+                     f"(asked {time_scale:g}x)")
+        rows.append(("trajectory", text))
     inspect = report.get("inspect", {})
     if inspect:
         surf = inspect.get("surface_error_mm", {})
@@ -190,6 +198,11 @@ class _Printer:
         self.live = sys.stdout.isatty()
         self._last = ""
         self._last_t = 0.0
+        self._printing: list[float] = []  # monotonic s of the first and the last printing state
+
+    def printing_s(self) -> float:
+        """Wall seconds between the first and the last progress of the printing state."""
+        return self._printing[-1] - self._printing[0] if self._printing else 0.0
 
     def line(self, text: str) -> None:
         self.end_progress()
@@ -205,6 +218,10 @@ class _Printer:
             text += f"  ETA {job.eta_s:5.0f} s"
         text += f"  {job.volume:8.0f} mm^3"
         now = time.monotonic()
+        if job.state in ("printing", "done"):
+            self._printing[1:] = [now] if self._printing else []
+            if not self._printing:
+                self._printing.append(now)
         if self.live:
             print("\r" + text + "\x1b[K", end="", flush=True)
             self._last = text

@@ -153,3 +153,37 @@ def test_short_paths_print_completely_at_high_time_scale(tmp_path: Path) -> None
     expected = RATE * (deposition_s() + 0.5 + 0.3)
     print(f"extruded {done.volume:.1f} mm^3, expected {expected:.1f} mm^3")
     assert 0.6 * expected < done.volume < 1.6 * expected, (done.volume, expected)
+
+
+def test_demo_summary_compares_extruded_volume_and_pace(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    import json
+
+    from mesp_cell.commands.demo import _against_toolpath, _Printer, _summary
+
+    (tmp_path / "report.json").write_text(json.dumps({
+        "toolpath": {"deposited_volume_mm3": 1000.0, "waypoints": 10, "length_mm": 100.0,
+                     "volume_error": 0.001},
+        "plan": {"duration_s": 800.0}}))
+    assert _against_toolpath(tmp_path, 1010.0) == " (+1.0% of the toolpath's 1000)"
+    assert "warning" not in capsys.readouterr().err
+    assert _against_toolpath(tmp_path, 2900.0) == " (+190.0% of the toolpath's 1000)"
+    assert "warning: the extruder delivered +190.0%" in capsys.readouterr().err
+    _summary(tmp_path, printing_s=20.0, time_scale=80.0)
+    assert "800 s of printing, printed in 20 s on the twin: 40x (asked 80x)" in (
+        capsys.readouterr().out)
+
+    class Job:
+        layer, layers, percent, eta_s, volume = 0, 3, 0.0, 0.0, 0.0
+        state = "sliced"
+
+    import mesp_cell.commands.demo as demo
+
+    clock = iter([10.0, 11.0, 15.0, 19.5])  # the monotonic time of each progress
+    monkeypatch.setattr(demo.time, "monotonic", lambda: next(clock))
+    printer = _Printer()
+    for state in ("sliced", "printing", "printing", "done"):
+        Job.state = state
+        printer.progress(Job())
+    assert printer.printing_s() == 8.5  # from the first printing state to done
