@@ -27,14 +27,22 @@ OPTIMIZE_ITERATIONS = 2
 pytestmark = pytest.mark.slow
 
 
-@pytest.fixture(scope="module", params=["socket", "aorta"])
+@pytest.fixture(scope="module", params=[("socket", EDGE_MM, 0), ("aorta", EDGE_MM, 0),
+                                        ("socket", 4.0, 1)],
+                ids=["socket", "aorta", "socket-refined"])
 def sliced(request: pytest.FixtureRequest) -> tuple[str, FieldResult, list[dict[str, object]]]:
-    """(example name, field result, critical-region report of the layer extraction)."""
-    name = str(request.param)
-    job = load_job(EXAMPLES / f"{name}.toml")
-    mesh, _ = tetrahedralize(load_surface(EXAMPLES / f"{name}.stl"),
-                             MeshConfig(edge_length_mm=EDGE_MM,
-                                        optimize_iterations=OPTIMIZE_ITERATIONS))
+    """(example name, field result, critical-region report of the layer extraction).
+
+    ``socket-refined``: fTetWild at 8 mm, then one red refinement with the boundary snapped
+    (``[mesh] refine``, the default for large models): the same criteria hold on it.
+    """
+    example, edge, refine = request.param
+    name = f"{example}-refined" if refine else example
+    job = load_job(EXAMPLES / f"{example}.toml")
+    mesh, stats = tetrahedralize(load_surface(EXAMPLES / f"{example}.stl"),
+                                 MeshConfig(edge_length_mm=edge, refine=refine,
+                                            optimize_iterations=OPTIMIZE_ITERATIONS))
+    assert stats.refinements == refine
     res = compute_field(mesh, job.slicing)
     out = extract_layers(mesh, res, job.slicing)
     return name, res, list(out.critical_report)
@@ -43,8 +51,12 @@ def sliced(request: pytest.FixtureRequest) -> tuple[str, FieldResult, list[dict[
 def test_layer_height_is_controlled(
         sliced: tuple[str, FieldResult, list[dict[str, object]]]) -> None:
     name, res, _ = sliced
-    assert res.status == "converged", (name, res.status, res.notes)
-    expected_regions = {"socket": 2, "aorta": 5}[name]
+    # At 6 mm the iteration converges; on the refined mesh (~12k tets refined to ~100k) it is
+    # still improving when the 30 iterations run out, as on the full-size socket (direct or
+    # refined: O_align still changing by over 1 % per iteration at a 0.005 mm height std).
+    allowed = ("converged", "max_iterations") if name.endswith("-refined") else ("converged",)
+    assert res.status in allowed, (name, res.status, res.notes)
+    expected_regions = {"socket": 2, "aorta": 5, "socket-refined": 2}[name]
     assert len(res.regions.regions) == expected_regions
     assert res.height.std <= 0.30 * res.height_initial.std, (name, res.report())
     assert res.height.cv <= 0.20, (name, res.report())
