@@ -494,7 +494,6 @@ def _spread_chunk(fill: NDArray[np.float32], tags: NDArray[np.int32], grid: Voxe
         hi = np.minimum(box_hi + margin, shape - 1)
         sl = tuple(slice(int(a), int(b) + 1) for a, b in zip(lo, hi, strict=True))
         f = fill[sl]
-        reach2 = margin**2
         wetting = closing > 0
         passes_here = 0
         # Gaps and grooves: free voxels a morphological closing of the ink bridges (computed
@@ -529,16 +528,8 @@ def _spread_chunk(fill: NDArray[np.float32], tags: NDArray[np.int32], grid: Voxe
             region_map, n_regions = ndimage.label(over, structure=structure)
             region = region_map[over_idx]
             region_excess = np.bincount(region, weights=excess, minlength=n_regions + 1)
-            nearest = ndimage.distance_transform_edt(~over, return_distances=False,
-                                                     return_indices=True)
-            room_idx = np.nonzero(room)
-            own = tuple(nearest[a][room_idx] for a in range(3))
-            del nearest
-            d2 = sum((own[a] - room_idx[a]).astype(np.int64) ** 2 for a in range(3))
-            near = d2 <= reach2
-            owner = region_map[tuple(o[near] for o in own)]
-            dst = tuple(r[near] for r in room_idx)
-            d2 = d2[near]
+            own, dst, d2 = _nearest_over(over_idx, room, margin)
+            owner = region_map[own]
             if gaps is not None:
                 # After the first (gaps only) pass: a region's remaining gaps, then open gel.
                 tier = (~gaps[dst]).astype(np.int8)
@@ -580,6 +571,47 @@ def _spread_chunk(fill: NDArray[np.float32], tags: NDArray[np.int32], grid: Voxe
     residual = float(np.clip(f - 1.0, 0.0, None).sum(dtype=np.float64)) * grid.voxel_volume
     return ChunkTrace(layer=layer, segments=0, volume_mm3=0.0, displaced_mm3=displaced or 0.0,
                       passes=passes, max_spread_mm=max_spread, residual_mm3=residual)
+
+
+def _nearest_over(over_idx: tuple[NDArray[np.intp], ...], room: NDArray[np.bool_],
+                  reach: int) -> tuple[tuple[NDArray[np.intp], ...], tuple[NDArray[np.intp], ...],
+                                       NDArray[np.int64]]:
+    """Each voxel with room within ``reach`` voxels (Euclidean) of an over-full voxel, paired
+    with its nearest over-full voxel.
+
+    The over-full voxels of a curved layer are a thin sheet in a box of a million voxels or
+    more, so this works on the voxels near them, not on the box: candidates from a box filter
+    of the over-full mask (separable, cheap), their nearest over-full voxel from a k-d tree.
+    (A Euclidean feature transform of the whole box did the same at ~50 ns per voxel of the
+    box: 90% of the socket's deposition time at 0.25 mm.)
+
+    Args:
+        over_idx: the over-full voxels' indices, as from ``np.nonzero``.
+        room: bool mask of the voxels that can take ink (same shape as the box).
+        reach: voxels.
+
+    Returns:
+        (nearest over-full voxel of each pair, the voxel with room, squared distance in
+        voxels), index tuples of equal length.
+    """
+    from scipy.spatial import cKDTree
+
+    over = np.zeros(room.shape, dtype=bool)
+    over[over_idx] = True
+    near = ndimage.maximum_filter(over, size=2 * reach + 1, mode="constant") & room
+    cand = np.nonzero(near)
+    if not len(cand[0]) or not len(over_idx[0]):
+        empty = tuple(np.zeros(0, dtype=np.intp) for _ in range(3))
+        return empty, empty, np.zeros(0, dtype=np.int64)
+    src = np.stack(over_idx, axis=1)
+    q = np.stack(cand, axis=1)
+    dist, j = cKDTree(src).query(q, distance_upper_bound=reach + 0.5)
+    ok = np.flatnonzero(np.isfinite(dist))
+    own_pts = src[j[ok]]
+    d2 = ((own_pts - q[ok]).astype(np.int64) ** 2).sum(axis=1)
+    keep = d2 <= reach**2
+    ok, own_pts, d2 = ok[keep], own_pts[keep], d2[keep]
+    return (tuple(own_pts[:, a] for a in range(3)), tuple(c[ok] for c in cand), d2)
 
 
 def _crop(mask: NDArray[np.bool_], pad: int) -> tuple[slice, slice, slice]:
