@@ -170,3 +170,22 @@ def test_per_layer_attribution_adds_up() -> None:
     assert set(summary) >= {"infill_ratio", "interior_infill_ratio", "pore_ratio",
                             "over_deposition",
                             "surface_error_mm", "per_layer"}
+
+
+def test_signed_distance_signs_by_pseudonormal_on_closed_meshes_only() -> None:
+    import igl
+
+    from sim.metrics import _signed_distance
+
+    ball = trimesh.creation.icosphere(subdivisions=3, radius=10.0)
+    pts = np.random.default_rng(0).uniform(-14.0, 14.0, (2000, 3))
+    winding = igl.signed_distance(pts, ball.vertices, ball.faces.astype(np.int64),
+                                  sign_type=igl.SIGNED_DISTANCE_TYPE_WINDING_NUMBER)[0]
+    assert np.allclose(_signed_distance(pts, ball), winding)  # pseudonormal, same result
+    r = np.linalg.norm(pts, axis=1)
+    clear = np.abs(r - 10.0) > 0.5  # away from the facets' chordal error
+    assert np.array_equal(np.sign(_signed_distance(pts, ball))[clear], np.sign(r - 10.0)[clear])
+    cap = trimesh.Trimesh(ball.vertices, ball.faces[:-10])  # open: the winding number decides
+    assert not cap.is_watertight
+    d = _signed_distance(pts, cap)
+    assert np.isfinite(d).all()
