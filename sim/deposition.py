@@ -528,7 +528,7 @@ def _spread_chunk(fill: NDArray[np.float32], tags: NDArray[np.int32], grid: Voxe
             region_map, n_regions = ndimage.label(over, structure=structure)
             region = region_map[over_idx]
             region_excess = np.bincount(region, weights=excess, minlength=n_regions + 1)
-            own, dst, d2 = _nearest_over(over_idx, room, margin)
+            own, dst, d2 = _nearest_over(over, over_idx, room, margin)
             owner = region_map[own]
             if gaps is not None:
                 # After the first (gaps only) pass: a region's remaining gaps, then open gel.
@@ -573,9 +573,10 @@ def _spread_chunk(fill: NDArray[np.float32], tags: NDArray[np.int32], grid: Voxe
                       passes=passes, max_spread_mm=max_spread, residual_mm3=residual)
 
 
-def _nearest_over(over_idx: tuple[NDArray[np.intp], ...], room: NDArray[np.bool_],
-                  reach: int) -> tuple[tuple[NDArray[np.intp], ...], tuple[NDArray[np.intp], ...],
-                                       NDArray[np.int64]]:
+def _nearest_over(over: NDArray[np.bool_], over_idx: tuple[NDArray[np.intp], ...],
+                  room: NDArray[np.bool_], reach: int
+                  ) -> tuple[tuple[NDArray[np.intp], ...], tuple[NDArray[np.intp], ...],
+                             NDArray[np.int64]]:
     """Each voxel with room within ``reach`` voxels (Euclidean) of an over-full voxel, paired
     with its nearest over-full voxel.
 
@@ -586,8 +587,8 @@ def _nearest_over(over_idx: tuple[NDArray[np.intp], ...], room: NDArray[np.bool_
     box: 90% of the socket's deposition time at 0.25 mm.)
 
     Args:
-        over_idx: the over-full voxels' indices, as from ``np.nonzero``.
-        room: bool mask of the voxels that can take ink (same shape as the box).
+        over: bool mask of the over-full voxels of the box; over_idx: ``np.nonzero(over)``.
+        room: bool mask of the voxels that can take ink (same shape).
         reach: voxels.
 
     Returns:
@@ -596,8 +597,6 @@ def _nearest_over(over_idx: tuple[NDArray[np.intp], ...], room: NDArray[np.bool_
     """
     from scipy.spatial import cKDTree
 
-    over = np.zeros(room.shape, dtype=bool)
-    over[over_idx] = True
     near = ndimage.maximum_filter(over, size=2 * reach + 1, mode="constant") & room
     cand = np.nonzero(near)
     if not len(cand[0]) or not len(over_idx[0]):

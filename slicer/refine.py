@@ -17,6 +17,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from slicer.operators import TET_FACES
 from slicer.tetrahedralize import orient_positive, tet_volumes
 
 _PAIRS = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
@@ -24,8 +25,6 @@ _PAIRS = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
 # m01, m02, m03, m12, m13, m23) and, for each, its other four vertices in cyclic order.
 _DIAGONALS = ((0, 5), (1, 4), (2, 3))
 _RINGS = ((1, 2, 4, 3), (0, 2, 5, 3), (0, 1, 5, 4))
-# Faces of a tet (outward for a positive tet), face k opposite vertex k.
-_FACES = np.array([(1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)])
 # A snapped tet must keep at least this share of its volume before the snap.
 KEEP_VOLUME = 0.7
 # Halvings of a vertex's snap displacement before it is given up.
@@ -81,7 +80,7 @@ def red_refine(vertices: NDArray[np.float64], tets: NDArray[np.integer]
 
 def boundary_vertices(tets: NDArray[np.integer]) -> NDArray[np.int64]:
     """(n,) int64, sorted ids of the vertices on the boundary faces of a tet mesh."""
-    faces = np.sort(np.asarray(tets, dtype=np.int64)[:, _FACES].reshape(-1, 3), axis=1)
+    faces = np.sort(np.asarray(tets, dtype=np.int64)[:, TET_FACES].reshape(-1, 3), axis=1)
     unique, counts = np.unique(faces, axis=0, return_counts=True)
     return np.unique(unique[counts == 1])
 

@@ -264,7 +264,7 @@ def test_nearest_over_full_voxel_matches_the_feature_transform(seed: int) -> Non
     over[rng.integers(0, 30, 40), rng.integers(0, 24, 40), rng.integers(4, 8, 40)] = True
     over[10:14, 5:15, 6] = True  # a sheet, as where a filament overlaps older ink
     room = ~over & (rng.random(shape) < 0.7)
-    own, dst, d2 = _nearest_over(np.nonzero(over), room, reach)
+    own, dst, d2 = _nearest_over(over, np.nonzero(over), room, reach)
     # the whole-box Euclidean feature transform, as before
     nearest = ndimage.distance_transform_edt(~over, return_distances=False,
                                              return_indices=True)
