@@ -296,6 +296,7 @@ def tetrahedralize(
         return mesh, stats
     # A feature thinner than the coarse edge (a fin, a thin wall) may not survive fTetWild at
     # twice the size: "auto" then pays for the direct mesh.
+    start = time.perf_counter()
     try:
         mesh, stats = _mesh(surface, config, n_refine, grading, threads, progress)
         missed = abs(stats.volume_error) > AUTO_MAX_VOLUME_ERROR
@@ -305,7 +306,8 @@ def tetrahedralize(
     if missed:
         progress.update(0.0, f"{why}: meshing directly")
         mesh, stats = _mesh(surface, config, 0, grading, threads, progress)
-        stats = TetStats(**{**stats.as_dict(), "refine_fallback": True})
+        stats = TetStats(**{**stats.as_dict(), "refine_fallback": True,
+                            "seconds": time.perf_counter() - start})  # both attempts
     progress.update(1.0, f"{stats.tets} tets, {stats.vertices} vertices")
     return mesh, stats
 
