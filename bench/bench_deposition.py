@@ -1,23 +1,30 @@
-"""Benchmark: deposition of a ~500k-waypoint synthetic job at 0.25 mm (target <= 60 s).
+"""Benchmark: deposition of a ~500k-waypoint job at 0.25 mm (target <= 60 s).
 
-A solid box printed with the planar, volume-matched, staggered raster (sim.baseline in
-"volume" mode), sized so the toolpath has about ``--waypoints`` waypoints. Prints the stage
-timings, the volume check, the metrics and the peak resident memory.
+By default a solid box printed with the planar, volume-matched, staggered raster (sim.baseline
+in "volume" mode), sized so the toolpath has about ``--waypoints`` waypoints. With ``--job DIR``
+a sliced job instead (its ``toolpath.npz`` and ``model.ply``; ``--layers A:B`` keeps layers
+A to B-1): a curved layer's over-full voxels are a thin sheet in a large box, which the box
+does not show (socket: see the README). Prints the stage timings, the volume check, the
+metrics and the peak resident memory.
 
     .venv/bin/python bench/bench_deposition.py [--waypoints 500000] [--voxel 0.25] [--metrics]
+    .venv/bin/python bench/bench_deposition.py --job out/socket --layers 100:120 --voxel 0.25
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import resource
 import time
+from pathlib import Path
 
 import numpy as np
 import trimesh
 
 from sim.baseline import PlanarConfig, planar_toolpath
 from sim.deposition import DepositionConfig, EllipseMorphology, covering_grid, deposit
+from slicer.stages import Toolpath
 
 
 def _morphology():  # type: ignore[no-untyped-def]
@@ -36,24 +43,34 @@ def main() -> None:
     ap.add_argument("--height", type=float, default=0.6, help="layer height, mm")
     ap.add_argument("--spacing", type=float, default=0.4, help="waypoint spacing, mm")
     ap.add_argument("--metrics", action="store_true", help="also time the quality metrics")
+    ap.add_argument("--job", type=Path, help="a sliced job directory instead of the box")
+    ap.add_argument("--layers", default="", metavar="A:B",
+                    help="with --job: layers A to B-1 (--metrics then compares that part of "
+                         "the print with the whole model)")
     args = ap.parse_args()
     morph = _morphology()
-    cfg = PlanarConfig(layer_height_mm=args.height, beta=float(morph.beta), width_mode="volume",
-                       perimeters=0, spacing_mm=args.spacing)
-    # Size the cube for the requested waypoint count: N ~ S^3 / (H W spacing).
-    probe = planar_toolpath(*_cube(10.0), morph, cfg)
-    width = float(probe.width[0])
-    side = (args.waypoints * args.height * width * args.spacing) ** (1.0 / 3.0)
     t0 = time.perf_counter()
-    vertices, faces = _cube(side)
-    toolpath = planar_toolpath(vertices, faces, morph, cfg)
+    if args.job:
+        vertices, faces, toolpath = _job(args.job, args.layers)
+        width = float(np.median(toolpath.width))
+        what = f"{args.job.name} layers {args.layers or 'all'}"
+    else:
+        cfg = PlanarConfig(layer_height_mm=args.height, beta=float(morph.beta),
+                           width_mode="volume", perimeters=0, spacing_mm=args.spacing)
+        # Size the cube for the requested waypoint count: N ~ S^3 / (H W spacing).
+        probe = planar_toolpath(*_cube(10.0), morph, cfg)
+        width = float(probe.width[0])
+        side = (args.waypoints * args.height * width * args.spacing) ** (1.0 / 3.0)
+        vertices, faces = _cube(side)
+        toolpath = planar_toolpath(vertices, faces, morph, cfg)
+        what = f"cube {side:.1f} mm"
     t_tp = time.perf_counter() - t0
     config = DepositionConfig(voxel_mm=args.voxel)
     t1 = time.perf_counter()
     grid = covering_grid(toolpath, morph, np.stack([vertices.min(0), vertices.max(0)]), config)
     dep = deposit(toolpath, morph, config, grid=grid)
     t_dep = time.perf_counter() - t1
-    print(f"job: cube {side:.1f} mm, {len(toolpath):,} waypoints, "
+    print(f"job: {what}, {len(toolpath):,} waypoints, "
           f"{int(np.unique(toolpath.layer).size)} layers, W {width:.3f} mm, "
           f"H {toolpath.height[0]:.3f} mm, v {toolpath.speed[0]:.2f} mm/s")
     print(f"grid: {grid.shape} = {grid.size:,} voxels of {grid.voxel} mm")
@@ -76,6 +93,21 @@ def main() -> None:
               f"{s['p95']:.3f} max {s['max']:.3f} mm")
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
     print(f"peak memory (max RSS) {peak:8.0f} MB")
+
+
+def _job(job_dir: Path, layers: str) -> tuple[np.ndarray, np.ndarray, Toolpath]:
+    """The model surface and toolpath of a sliced job, optionally layers A:B only."""
+    model = trimesh.load(job_dir / "model.ply", force="mesh", process=False)
+    toolpath = Toolpath.load(job_dir)
+    if layers:
+        a, b = (int(x) for x in layers.split(":"))
+        keep = (toolpath.layer >= a) & (toolpath.layer < b)
+        n = len(toolpath.layer)
+        toolpath = Toolpath(**{f.name: (v[keep] if isinstance(v, np.ndarray) and len(v) == n
+                                        else v)
+                               for f in dataclasses.fields(toolpath)
+                               for v in [getattr(toolpath, f.name)]})
+    return np.asarray(model.vertices), np.asarray(model.faces), toolpath
 
 
 def _cube(side: float) -> tuple[np.ndarray, np.ndarray]:
