@@ -198,11 +198,12 @@ class _Printer:
         self.live = sys.stdout.isatty()
         self._last = ""
         self._last_t = 0.0
-        self._printing: list[float] = []  # monotonic s of the first and the last printing state
+        self._print_start: float | None = None  # monotonic s of the first printing progress
+        self._print_end = 0.0  # ... and of the last (printing or done)
 
     def printing_s(self) -> float:
         """Wall seconds between the first and the last progress of the printing state."""
-        return self._printing[-1] - self._printing[0] if self._printing else 0.0
+        return 0.0 if self._print_start is None else self._print_end - self._print_start
 
     def line(self, text: str) -> None:
         self.end_progress()
@@ -219,9 +220,9 @@ class _Printer:
         text += f"  {job.volume:8.0f} mm^3"
         now = time.monotonic()
         if job.state in ("printing", "done"):
-            self._printing[1:] = [now] if self._printing else []
-            if not self._printing:
-                self._printing.append(now)
+            if self._print_start is None:
+                self._print_start = now
+            self._print_end = now
         if self.live:
             print("\r" + text + "\x1b[K", end="", flush=True)
             self._last = text

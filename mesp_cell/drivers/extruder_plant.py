@@ -12,7 +12,7 @@ import math
 import threading
 from dataclasses import dataclass
 
-from mesp_cell.drivers.sim_clock import SimClock
+from mesp_cell.drivers.sim_clock import SimClock, clock_for
 from mesp_cell.messages import FAULT_ESTOP, FAULT_STALL, FAULT_WATCHDOG
 
 
@@ -50,11 +50,8 @@ class ExtruderPlant:
     """
 
     def __init__(self, params: PlantParams, now: float, clock: SimClock | None = None) -> None:
-        if clock is not None and abs(clock.scale - params.time_scale) > 1e-9 * params.time_scale:
-            raise ValueError(f"clock scale {clock.scale} differs from time_scale "
-                             f"{params.time_scale}")
         self.params = params
-        self.clock = clock or SimClock(params.time_scale)
+        self.clock = clock_for(params.time_scale, clock)
         self.watchdog_s = params.watchdog_s
         self.rate_set = 0.0
         self.rate = 0.0

@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from mesp_cell.drivers.robot_base import UR5E_QD_LIMIT, ServoConfig, ur5e_flange
-from mesp_cell.drivers.sim_clock import SimClock
+from mesp_cell.drivers.sim_clock import SimClock, clock_for
 
 HOME_Q = np.deg2rad([0.0, -90.0, 90.0, -90.0, -90.0, 0.0])
 
@@ -44,11 +44,8 @@ class KinematicTwin:
 
     def __init__(self, servo: ServoConfig, q0: np.ndarray | None = None,
                  tool_T: np.ndarray | None = None, clock: SimClock | None = None) -> None:
-        if clock is not None and abs(clock.scale - servo.time_scale) > 1e-9 * servo.time_scale:
-            raise ValueError(f"clock scale {clock.scale} differs from servo time_scale "
-                             f"{servo.time_scale}")
         self.servo = servo
-        self.clock = clock or SimClock(servo.time_scale)
+        self.clock = clock_for(servo.time_scale, clock)
         self._sim: float | None = None  # s, simulated time of the current motion
         self.q = np.array(HOME_Q if q0 is None else q0, dtype=np.float64)
         self.qd = np.zeros(6)

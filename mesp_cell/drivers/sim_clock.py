@@ -98,3 +98,13 @@ class SimClock:
         if self._map is not None:
             self._map.close()
             self._map = None
+
+
+def clock_for(scale: float, clock: SimClock | None = None) -> SimClock:
+    """``clock``, checked to run at ``scale`` (a clock of another speed is a launch mistake),
+    or a private clock at ``scale``."""
+    if clock is None:
+        return SimClock(scale)
+    if abs(clock.scale - scale) > 1e-9 * scale:
+        raise ValueError(f"clock scale {clock.scale} differs from time_scale {scale}")
+    return clock
