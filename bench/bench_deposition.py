@@ -24,6 +24,7 @@ import trimesh
 
 from sim.baseline import PlanarConfig, planar_toolpath
 from sim.deposition import DepositionConfig, EllipseMorphology, covering_grid, deposit
+from sim.voxels import MAX_VOXELS
 from slicer.stages import Toolpath
 
 
@@ -47,6 +48,9 @@ def main() -> None:
     ap.add_argument("--layers", default="", metavar="A:B",
                     help="with --job: layers A to B-1 (--metrics then compares that part of "
                          "the print with the whole model)")
+    ap.add_argument("--max-voxels", type=int, default=MAX_VOXELS,
+                    help="largest grid (the default is the inspection's limit; the deposition "
+                         "alone needs 8 bytes a voxel)")
     args = ap.parse_args()
     morph = _morphology()
     t0 = time.perf_counter()
@@ -67,7 +71,8 @@ def main() -> None:
     t_tp = time.perf_counter() - t0
     config = DepositionConfig(voxel_mm=args.voxel)
     t1 = time.perf_counter()
-    grid = covering_grid(toolpath, morph, np.stack([vertices.min(0), vertices.max(0)]), config)
+    grid = covering_grid(toolpath, morph, np.stack([vertices.min(0), vertices.max(0)]), config,
+                         args.max_voxels)
     dep = deposit(toolpath, morph, config, grid=grid)
     t_dep = time.perf_counter() - t1
     print(f"job: {what}, {len(toolpath):,} waypoints, "

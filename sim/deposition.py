@@ -25,11 +25,11 @@ Model (paper sections 3.1, 3.2):
   Neighbouring filaments fuse only where they overlap; where they merely touch, the gel between
   them stays (pores).
 * Ink landing in voxels that are already full (f > 1 after adding it) cannot compress: it is
-  displaced into nearby free space (see ``_spread_chunk``). The connected over-full regions
-  (where a new filament overlaps older ink) push their excess into the nearest voxels with
-  room, nearest first; gaps and grooves of the ink (free voxels a morphological closing of the
-  ink bridges, up to ``gap_mm`` wide) are wetted first, since the immiscible ink lowers its
-  interface with the gel that way, and only then open gel. This is what makes a
+  displaced into nearby free space (see ``sim.deposition_kernels.spread``). The connected
+  over-full regions (where a new filament overlaps older ink) push their excess into the
+  nearest voxels with room, nearest first; gaps and grooves of the ink (free voxels a
+  morphological closing of the ink bridges, up to ``gap_mm`` wide) are wetted first, since
+  the immiscible ink lowers its interface with the gel that way, and only then open gel. This is what makes a
   volume-matched toolpath fill the gaps between filaments: the over-height of each filament
   (h_f = H / beta) overlaps the layer below and is displaced into the gaps beside it; it is
   also why stacked (non-staggered) rasters keep aligned voids and why the first layer, which
@@ -38,24 +38,27 @@ Model (paper sections 3.1, 3.2):
   planner), gel flow, curing shrinkage, nozzle drag.
 
 The toolpath is processed in print order in chunks (a layer, split into at most
-``chunk_segments`` segments): a chunk's ink is rasterised at once (vectorised over segments
-and voxel candidates, batched), then its excess is spread. A segment deposits when its two
-waypoints belong to the same path and both extrude; its speed is the mean of theirs. Volume
-is conserved exactly up to float32 rounding of the fill field.
+``chunk_segments`` segments): a chunk's ink is rasterised at once, then its excess is spread.
+Both are compiled kernels (``sim.deposition_kernels``, numba) that visit only the voxels near
+the layer: a curved layer is a thin sheet in a large box, and box-wide array operations cost
+90% of the time before. A worker thread rasterises the next chunk while one spreads. A
+segment deposits when its two waypoints belong to the same path and both extrude; its speed
+is the mean of theirs. Volume is conserved exactly up to float32 rounding of the fill field.
 """
 
 from __future__ import annotations
 
 import itertools
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import NamedTuple, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import ndimage
 
-from sim.voxels import VoxelGrid, closing_cube, ragged_boxes
+from sim import deposition_kernels as kernels
+from sim.voxels import MAX_VOXELS, VoxelGrid
 from slicer.errors import InputError
 from slicer.progress import NullProgress, Progress
 from slicer.stages import Toolpath
@@ -118,12 +121,11 @@ class DepositionConfig:
     Attributes:
         voxel_mm: float, mm, voxel edge.
         pad_mm: float, mm, free margin around the job in an automatic grid.
-        spread_margin_mm: float, mm, how far beyond a chunk's own voxels excess ink may be
-            pushed in the first attempt (the neighbourhood searched for free voxels; it grows
-            automatically when a neighbourhood is full).
+        spread_margin_mm: float, mm, how far from an over-full voxel its excess ink may be
+            pushed in the first attempt (the neighbourhood searched for voxels with room; it
+            doubles while a neighbourhood is full, up to the whole grid).
         max_passes: int, nearest-free-voxel passes per chunk and neighbourhood.
         chunk_segments: int, at most this many segments are rasterised before spreading.
-        batch_candidates: int, voxel candidates handled at once (bounds memory).
         gap_mm: float, mm, excess goes first into gaps and grooves of the ink up to about this
             width (free voxels a morphological closing of the ink fills); 0 = nearest free
             voxel only.
@@ -137,7 +139,6 @@ class DepositionConfig:
     spread_margin_mm: float = 1.0
     max_passes: int = 6
     chunk_segments: int = 60_000
-    batch_candidates: int = 3_000_000
     gap_mm: float = 1.0
     center_offset: float = 0.0
 
@@ -147,8 +148,13 @@ class DepositionConfig:
                              "use a voxel between 0.01 and 10 mm (default 0.25)")
         if self.pad_mm < 0 or self.spread_margin_mm <= 0:
             raise ValueError("need pad_mm >= 0 and spread_margin_mm > 0")
-        if self.max_passes < 1 or self.chunk_segments < 1 or self.batch_candidates < 1000:
-            raise ValueError("max_passes, chunk_segments must be >= 1, batch_candidates >= 1000")
+        if self.max_passes < 1 or self.chunk_segments < 1:
+            raise ValueError("max_passes and chunk_segments must be >= 1")
+        if round(0.5 * self.gap_mm / self.voxel_mm) > kernels.MAX_CLOSING:
+            raise InputError(f"gaps up to {self.gap_mm} mm are more than "
+                             f"{2 * kernels.MAX_CLOSING} voxels of {self.voxel_mm} mm",
+                             f"use a voxel of at least "
+                             f"{self.gap_mm / (2 * kernels.MAX_CLOSING):.3f} mm or a smaller gap")
         if not -0.5 <= self.center_offset <= 0.5:
             raise InputError(f"filament centre offset {self.center_offset} is out of range",
                              "use -0.5 to 0.5 (a fraction of the filament height; 0 = centred)")
@@ -270,7 +276,9 @@ class Deposit:
         commanded_mm3: float, sum of C * dt over extruding segments.
         status: "ok", or "overfull" when some excess found no free voxel (see ``trace``).
         trace: one ChunkTrace per chunk, in print order.
-        timings: stage name -> seconds.
+        timings: stage name -> seconds: segments (and the grid), rasterise (in a worker
+            thread, overlapped with the spreading), wait (for the worker, and adding the ink),
+            spread.
         segments: number of extruding segments.
     """
 
@@ -335,22 +343,35 @@ def deposit(toolpath: Toolpath, morphology: Morphology,
         grid = VoxelGrid.around(box[0], box[1], config.voxel_mm, config.pad_mm)
     fill = np.zeros(grid.shape, dtype=np.float32)
     tags = np.full(grid.shape, -1, dtype=np.int32)
-    timings = {"segments": time.perf_counter() - t0, "rasterise": 0.0, "spread": 0.0}
+    timings = {"segments": time.perf_counter() - t0, "rasterise": 0.0, "wait": 0.0,
+               "spread": 0.0}
     traces: list[ChunkTrace] = []
     total = len(seg.length)
     extent = _half_extent(seg)
-    for lo, hi in _chunks(seg.layer, config.chunk_segments):
-        t1 = time.perf_counter()
-        layer = int(seg.layer[lo])
-        box_lo, box_hi = _rasterise_chunk(seg, extent, lo, hi, grid, fill, tags, layer,
-                                          config.batch_candidates)
-        t2 = time.perf_counter()
-        trace = _spread_chunk(fill, tags, grid, box_lo, box_hi, layer, config)
-        timings["rasterise"] += t2 - t1
-        timings["spread"] += time.perf_counter() - t2
-        traces.append(trace._replace(segments=hi - lo,
-                                     volume_mm3=float(seg.volume[lo:hi].sum())))
-        progress.update(hi / max(total, 1), f"layer {layer}")
+    chunks = _chunks(seg.layer, config.chunk_segments)
+    # A chunk's ink does not depend on what is printed already, so a worker thread rasterises
+    # the next chunk while this one spreads (the kernels release the GIL). One block table
+    # each: a call leaves its table as it found it, but two calls at once must not share one.
+    tables = (kernels.block_table(grid.shape), kernels.block_table(grid.shape))
+    with ThreadPoolExecutor(max_workers=1) as worker:
+        ahead = [worker.submit(_rasterise_chunk, seg, extent, lo, hi, grid, tables[0])
+                 for lo, hi in chunks[:1]]
+        for n, (lo, hi) in enumerate(chunks):
+            t1 = time.perf_counter()
+            ink = ahead.pop().result()
+            if n + 1 < len(chunks):
+                ahead.append(worker.submit(_rasterise_chunk, seg, extent, *chunks[n + 1], grid,
+                                           tables[0]))
+            layer = int(seg.layer[lo])
+            _add_ink(fill, tags, ink, layer, grid)
+            t2 = time.perf_counter()
+            trace = _spread_chunk(fill, tags, grid, ink.flat, layer, config, tables[1])
+            timings["rasterise"] += ink.seconds
+            timings["wait"] += t2 - t1
+            timings["spread"] += time.perf_counter() - t2
+            traces.append(trace._replace(segments=hi - lo,
+                                         volume_mm3=float(seg.volume[lo:hi].sum())))
+            progress.update(hi / max(total, 1), f"layer {layer}")
     residual = sum(t.residual_mm3 for t in traces)
     fill.setflags(write=False)
     tags.setflags(write=False)
@@ -373,11 +394,22 @@ def _chunks(layer: NDArray[np.int32], size: int) -> list[tuple[int, int]]:
     return out
 
 
+class ChunkInk(NamedTuple):
+    """The ink one chunk brings.
+
+    flat: (V,) int64, the voxels it goes to; volume: (V,) float64, mm^3 each.
+    seconds: float, time the rasterisation took.
+    """
+
+    flat: NDArray[np.int64]
+    volume: NDArray[np.float64]
+    seconds: float
+
+
 def _rasterise_chunk(seg: Segments, extent: NDArray[np.float64], lo: int, hi: int,
-                     grid: VoxelGrid,
-                     fill: NDArray[np.float32], tags: NDArray[np.int32], layer: int, batch: int
-                     ) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Add the ink of segments [lo, hi) to ``fill``; returns the touched voxel box (inclusive)."""
+                     grid: VoxelGrid, table: NDArray[np.int32]) -> ChunkInk:
+    """The ink of segments [lo, hi) per voxel (``kernels.rasterise``)."""
+    t0 = time.perf_counter()
     shape = np.asarray(grid.shape)
     vox = grid.voxel
     org = grid.origin_array
@@ -389,251 +421,49 @@ def _rasterise_chunk(seg: Segments, extent: NDArray[np.float64], lo: int, hi: in
     vhi = np.clip(vhi, -1, shape - 1)
     # Fallback voxel (midpoint) for filaments thinner than the grid resolves.
     mid = np.clip(np.floor((0.5 * (p0 + p1) - org) / vox).astype(np.int64), 0, shape - 1)
-    box_lo = np.minimum(vlo.min(axis=0), mid.min(axis=0))
-    box_hi = np.maximum(vhi.max(axis=0), mid.max(axis=0))
-    sub_shape = box_hi - box_lo + 1
-    acc = np.zeros(int(np.prod(sub_shape)), dtype=np.float64)
-    # Per segment, in index space relative to the segment start; float32 is ample here.
-    t = seg.tangent[lo:hi].astype(np.float32)  # s in voxels
-    b = (seg.lateral[lo:hi] * vox / (0.5 * seg.width[lo:hi, None])).astype(np.float32)
-    u = (seg.up[lo:hi] * vox / (0.5 * seg.height[lo:hi, None])).astype(np.float32)
-    q0 = (org + (vlo + 0.5) * vox) - p0  # offset of the box's first voxel centre, mm
-    s0 = (np.einsum("ij,ij->i", q0, seg.tangent[lo:hi]) / vox).astype(np.float32)
-    b0 = np.einsum("ij,ij->i", q0, b / vox).astype(np.float32)
-    u0 = np.einsum("ij,ij->i", q0, u / vox).astype(np.float32)
-    length = (seg.length[lo:hi] / vox).astype(np.float32)  # in voxels
-    # Semi-axes in voxels: x, y below are normalised, x = 1 on the ellipse.
-    ax = (0.5 * seg.width[lo:hi] / vox).astype(np.float32)
-    ay = (0.5 * seg.height[lo:hi] / vox).astype(np.float32)
-    volume = seg.volume[lo:hi]
-    n = hi - lo
-    count = np.prod(np.maximum(vhi - vlo + 1, 0), axis=1)
-    cum = np.cumsum(count)
-    cuts = np.searchsorted(cum, np.arange(batch, int(cum[-1]) if n else 0, batch), side="right")
-    weight_sum = np.zeros(n, dtype=np.float64)
-    hits: list[tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float32]]] = []
-    # Per-segment coefficients in one float32 table, repeated once per candidate voxel
-    # (a candidate's segment is contiguous, so np.repeat beats 15 separate gathers).
-    coef = np.column_stack([s0, t, b0, b, u0, u, length, 1.0 / ax, 1.0 / ay]).astype(np.float32)
-    for part in np.split(np.arange(n), cuts):
-        if part.size == 0:
-            continue
-        _, cell = ragged_boxes(vlo[part], vhi[part])
-        cnt = count[part]
-        k = np.repeat(part, cnt)
-        ck = np.repeat(coef[part], cnt, axis=0)
-        rel = (cell - np.repeat(vlo[part], cnt, axis=0)).astype(np.float32)
-        s = ck[:, 0] + np.einsum("ij,ij->i", rel, ck[:, 1:4])
-        x = ck[:, 4] + np.einsum("ij,ij->i", rel, ck[:, 5:8])
-        y = ck[:, 8] + np.einsum("ij,ij->i", rel, ck[:, 9:12])
-        # Partial-volume coverage of the voxel: exact along the segment (flat ends, so
-        # consecutive segments sum to 1), first-order signed distance across the ellipse.
-        cov = np.clip(np.minimum(s + 0.5, ck[:, 12]) - np.maximum(s - 0.5, 0.0), 0.0, 1.0)
-        rho = np.sqrt(x * x + y * y)
-        grad = np.sqrt((x * ck[:, 13]) ** 2 + (y * ck[:, 14]) ** 2)
-        dist = (rho - 1.0) * rho / np.maximum(grad, 1e-6)  # voxels, < 0 inside
-        cov *= np.clip(0.5 - dist, 0.0, 1.0)
-        keep = cov > 0
-        k, cell, cov = k[keep], cell[keep], cov[keep]
-        weight_sum += np.bincount(k, weights=cov, minlength=n)
-        c = cell - box_lo
-        hits.append((k, (c[:, 0] * sub_shape[1] + c[:, 1]) * sub_shape[2] + c[:, 2], cov))
-    share = np.divide(volume, weight_sum, out=np.zeros(n), where=weight_sum > 1e-9)
-    for k, flat, cov in hits:
-        acc += np.bincount(flat, weights=share[k] * cov, minlength=acc.size)
-    empty = weight_sum <= 1e-9
-    if np.any(empty):
-        c = mid[empty] - box_lo
-        flat = (c[:, 0] * sub_shape[1] + c[:, 1]) * sub_shape[2] + c[:, 2]
-        acc += np.bincount(flat, weights=volume[empty], minlength=acc.size)
-    box = tuple(slice(int(a), int(b) + 1) for a, b in zip(box_lo, box_hi, strict=True))
-    add = (acc.reshape(fill[box].shape) / grid.voxel_volume).astype(np.float32)
-    # A voxel belongs to the layer that brought most of its ink.
-    tags[box][add > fill[box]] = layer
-    fill[box] += add
-    return box_lo, box_hi
+    flat, ink = kernels.rasterise(
+        p0, seg.tangent[lo:hi], seg.lateral[lo:hi], seg.up[lo:hi], seg.length[lo:hi],
+        seg.width[lo:hi], seg.height[lo:hi], seg.volume[lo:hi], vlo, vhi, mid, org, vox,
+        grid.shape, table)
+    return ChunkInk(flat, ink, time.perf_counter() - t0)
+
+
+def _add_ink(fill: NDArray[np.float32], tags: NDArray[np.int32], ink: ChunkInk, layer: int,
+             grid: VoxelGrid) -> None:
+    """Add a chunk's ink to ``fill``; a voxel belongs to the layer that brought most of it."""
+    kernels.add_ink(fill.reshape(-1), tags.reshape(-1), ink.flat, ink.volume,
+                    1.0 / grid.voxel_volume, layer)
 
 
 def _spread_chunk(fill: NDArray[np.float32], tags: NDArray[np.int32], grid: VoxelGrid,
-                  box_lo: NDArray[np.int64], box_hi: NDArray[np.int64], layer: int,
-                  config: DepositionConfig) -> ChunkTrace:
-    """Push the excess of over-full voxels in the chunk box into nearby voxels with room.
-
-    The over-full voxels form connected regions (where a new filament overlaps older ink);
-    each region's total excess flows into the voxels with room nearest to it (a Euclidean
-    feature transform assigns every free voxel to its nearest over-full voxel, hence region),
-    nearest first, within reach of the neighbourhood margin. Gaps and grooves of the ink
-    (free voxels that a morphological closing of the ink fills, up to ``config.gap_mm`` wide)
-    are filled first: the immiscible ink wets them to shrink its interface with the gel.
-    Only excess that finds no gap within reach goes into open gel. What a region cannot place
-    goes on in another pass; when a neighbourhood runs out of room it is enlarged (doubled) up
-    to the whole grid. Voxels receiving ink are tagged with ``layer``.
-    """
-    shape = np.asarray(grid.shape)
+                  touched: NDArray[np.int64], layer: int, config: DepositionConfig,
+                  table: NDArray[np.int32]) -> ChunkTrace:
+    """Push the excess of the over-full voxels among ``touched`` into nearby voxels with room
+    (``kernels.spread``: regions, nearest first, gaps and grooves of the ink first)."""
     vox = grid.voxel
     margin = max(1, int(np.ceil(config.spread_margin_mm / vox)))
-    displaced: float | None = None
-    passes = 0
-    max_spread = 0.0
-    structure = np.ones((3, 3, 3), dtype=bool)
     closing = round(0.5 * config.gap_mm / vox)
-    # Only the part of the chunk box that holds over-full voxels matters (plus the margin).
-    chunk = tuple(slice(int(a), int(b) + 1) for a, b in zip(box_lo, box_hi, strict=True))
-    over_any = fill[chunk] > OVERFULL
-    if not np.any(over_any):
-        return ChunkTrace(layer, 0, 0.0, 0.0, 0, 0.0, 0.0)
-    for axis in range(3):
-        other = tuple(a for a in range(3) if a != axis)
-        hit = np.flatnonzero(over_any.any(axis=other))
-        box_hi = box_hi.copy()
-        box_hi[axis] = box_lo[axis] + hit[-1]
-        box_lo = box_lo.copy()
-        box_lo[axis] = box_lo[axis] + hit[0]
-    while True:
-        lo = np.maximum(box_lo - margin, 0)
-        hi = np.minimum(box_hi + margin, shape - 1)
-        sl = tuple(slice(int(a), int(b) + 1) for a, b in zip(lo, hi, strict=True))
-        f = fill[sl]
-        wetting = closing > 0
-        passes_here = 0
-        # Gaps and grooves: free voxels a morphological closing of the ink bridges (computed
-        # once per neighbourhood: the passes only fill them, they do not move).
-        gaps = closing_cube(f >= 0.5, closing) if wetting else None
-        f_all, gaps_all, sl_all = f, gaps, sl
-        for _ in range(config.max_passes):
-            over_all = f_all > OVERFULL
-            if not np.any(over_all):
-                break
-            # Work on the over-full voxels' box plus the reach only.
-            sub = _crop(over_all, margin)
-            f = f_all[sub]
-            over = over_all[sub]
-            gaps = gaps_all[sub] if gaps_all is not None else None
-            sl = tuple(slice(a.start + s.start, a.start + s.stop)
-                       for a, s in zip(sl_all, sub, strict=True))
-            room = f < FULL
-            if wetting and gaps is not None and passes_here == 0:
-                room &= gaps
-            if not np.any(room):
-                if wetting:
-                    wetting = False
-                    continue
-                break
-            passes += 1
-            passes_here += 1
-            over_idx = np.nonzero(over)
-            excess = f[over_idx].astype(np.float64) - 1.0
-            if displaced is None:
-                displaced = float(excess.sum()) * grid.voxel_volume
-            region_map, n_regions = ndimage.label(over, structure=structure)
-            region = region_map[over_idx]
-            region_excess = np.bincount(region, weights=excess, minlength=n_regions + 1)
-            own, dst, d2 = _nearest_over(over, over_idx, room, margin)
-            owner = region_map[own]
-            if gaps is not None:
-                # After the first (gaps only) pass: a region's remaining gaps, then open gel.
-                tier = (~gaps[dst]).astype(np.int8)
-                order = np.lexsort((d2, tier, owner))
-            else:
-                order = np.lexsort((d2, owner))
-            owner, d2 = owner[order], d2[order]
-            dst = tuple(a[order] for a in dst)
-            cap = 1.0 - f[dst].astype(np.float64)
-            # Fill each region's candidates in order: cumulative capacity per region group.
-            cum = np.cumsum(cap)
-            if owner.size:
-                starts = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
-                first = np.repeat(cum[starts] - cap[starts], np.diff(np.r_[starts, owner.size]))
-            else:
-                first = np.zeros(0)
-            take = np.clip(region_excess[owner] - (cum - cap - first), 0.0, cap)
-            moved = take > 0
-            if not np.any(moved):
-                if wetting:
-                    wetting = False
-                    continue
-                break
-            max_spread = max(max_spread, float(np.sqrt(d2[moved].max())) * vox)
-            placed = np.bincount(owner, weights=take, minlength=n_regions + 1)
-            share = np.divide(placed, region_excess, out=np.zeros_like(placed),
-                              where=region_excess > 0)
-            got = tuple(a[moved] for a in dst)
-            gained = take[moved].astype(np.float32)
-            major = gained > f[got]
-            tags[sl][tuple(a[major] for a in got)] = layer
-            f[got] += gained
-            f[over_idx] -= (excess * share[region]).astype(np.float32)
-        f, gaps, sl = f_all, gaps_all, sl_all
-        whole = bool(np.all(lo == 0) and np.all(hi == shape - 1))
-        if whole or not np.any(f > OVERFULL):
-            break
-        margin *= 2
-    residual = float(np.clip(f - 1.0, 0.0, None).sum(dtype=np.float64)) * grid.voxel_volume
-    return ChunkTrace(layer=layer, segments=0, volume_mm3=0.0, displaced_mm3=displaced or 0.0,
-                      passes=passes, max_spread_mm=max_spread, residual_mm3=residual)
-
-
-def _nearest_over(over: NDArray[np.bool_], over_idx: tuple[NDArray[np.intp], ...],
-                  room: NDArray[np.bool_], reach: int
-                  ) -> tuple[tuple[NDArray[np.intp], ...], tuple[NDArray[np.intp], ...],
-                             NDArray[np.int64]]:
-    """Each voxel with room within ``reach`` voxels (Euclidean) of an over-full voxel, paired
-    with its nearest over-full voxel.
-
-    The over-full voxels of a curved layer are a thin sheet in a box of a million voxels or
-    more, so this works on the voxels near them, not on the box: candidates from a box filter
-    of the over-full mask (separable, cheap), their nearest over-full voxel from a k-d tree.
-    (A Euclidean feature transform of the whole box did the same at ~50 ns per voxel of the
-    box: 90% of the socket's deposition time at 0.25 mm.)
-
-    Args:
-        over: bool mask of the over-full voxels of the box; over_idx: ``np.nonzero(over)``.
-        room: bool mask of the voxels that can take ink (same shape).
-        reach: voxels.
-
-    Returns:
-        (nearest over-full voxel of each pair, the voxel with room, squared distance in
-        voxels), index tuples of equal length.
-    """
-    from scipy.spatial import cKDTree
-
-    near = ndimage.maximum_filter(over, size=2 * reach + 1, mode="constant") & room
-    cand = np.nonzero(near)
-    if not len(cand[0]) or not len(over_idx[0]):
-        empty = tuple(np.zeros(0, dtype=np.intp) for _ in range(3))
-        return empty, empty, np.zeros(0, dtype=np.int64)
-    src = np.stack(over_idx, axis=1)
-    q = np.stack(cand, axis=1)
-    dist, j = cKDTree(src).query(q, distance_upper_bound=reach + 0.5)
-    ok = np.flatnonzero(np.isfinite(dist))
-    own_pts = src[j[ok]]
-    d2 = ((own_pts - q[ok]).astype(np.int64) ** 2).sum(axis=1)
-    keep = d2 <= reach**2
-    ok, own_pts, d2 = ok[keep], own_pts[keep], d2[keep]
-    return (tuple(own_pts[:, a] for a in range(3)), tuple(c[ok] for c in cand), d2)
-
-
-def _crop(mask: NDArray[np.bool_], pad: int) -> tuple[slice, slice, slice]:
-    """Slices of the bounding box of ``mask`` (non-empty) grown by ``pad``, clipped to it."""
-    out = []
-    for axis in range(3):
-        other = tuple(a for a in range(3) if a != axis)
-        hit = np.flatnonzero(mask.any(axis=other))
-        out.append(slice(max(int(hit[0]) - pad, 0), min(int(hit[-1]) + pad + 1, mask.shape[axis])))
-    return out[0], out[1], out[2]
+    done = kernels.spread(fill.reshape(-1), tags.reshape(-1), grid.shape, table, touched,
+                          layer, margin, closing, config.max_passes, FULL, OVERFULL)
+    return ChunkTrace(layer=layer, segments=0, volume_mm3=0.0,
+                      displaced_mm3=done.displaced * grid.voxel_volume, passes=done.passes,
+                      max_spread_mm=float(np.sqrt(done.max_d2)) * vox,
+                      residual_mm3=done.residual * grid.voxel_volume)
 
 
 def covering_grid(toolpath: Toolpath, morphology: Morphology,
                   extra: NDArray[np.float64] | None = None,
-                  config: DepositionConfig | None = None) -> VoxelGrid:
+                  config: DepositionConfig | None = None,
+                  max_voxels: int = MAX_VOXELS) -> VoxelGrid:
     """The grid holding every filament of ``toolpath`` and the box ``extra`` ((2, 3) mm).
 
     Raises:
-        InputError: the grid would be too large for ``config.voxel_mm``.
+        InputError: the grid would have more than ``max_voxels`` voxels of ``config.voxel_mm``
+            (the default bounds what the inspection's metrics can handle).
     """
     config = config or DepositionConfig()
     box = job_bounds(extrusion_segments(toolpath, morphology, config.center_offset))
     if extra is not None:
         extra = np.asarray(extra, dtype=np.float64)
         box = np.stack([np.minimum(box[0], extra[0]), np.maximum(box[1], extra[1])])
-    return VoxelGrid.around(box[0], box[1], config.voxel_mm, config.pad_mm)
+    return VoxelGrid.around(box[0], box[1], config.voxel_mm, config.pad_mm, max_voxels)

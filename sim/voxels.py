@@ -47,13 +47,13 @@ class VoxelGrid:
 
     @staticmethod
     def around(lo: NDArray[np.float64], hi: NDArray[np.float64], voxel: float,
-               pad: float = 0.0) -> VoxelGrid:
+               pad: float = 0.0, max_voxels: int = MAX_VOXELS) -> VoxelGrid:
         """The grid of ``voxel`` covering the box ``[lo, hi]`` (mm) grown by ``pad`` mm.
 
         Voxel corners lie on the lattice of multiples of ``voxel`` in the model frame.
 
         Raises:
-            InputError: the grid would exceed ``MAX_VOXELS``.
+            InputError: the grid would exceed ``max_voxels``.
         """
         # Snap to the model frame's lattice of voxel corners (multiples of ``voxel``), so the
         # same model point always falls at the same place in its voxel, whatever the job box.
@@ -61,11 +61,11 @@ class VoxelGrid:
         hi = np.asarray(hi, dtype=np.float64) + pad
         shape = np.maximum(np.ceil((hi - lo) / voxel - 1e-9).astype(np.int64), 1)
         count = int(np.prod(shape))
-        if count > MAX_VOXELS:
-            suggest = voxel * (count / MAX_VOXELS) ** (1.0 / 3.0) * 1.05
+        if count > max_voxels:
+            suggest = voxel * (count / max_voxels) ** (1.0 / 3.0) * 1.05
             raise InputError(
                 f"a {voxel:g} mm voxel grid over this job has {count:,} voxels "
-                f"(limit {MAX_VOXELS:,})",
+                f"(limit {max_voxels:,})",
                 f"use --voxel {suggest:.2f} or larger",
             )
         origin = lo

@@ -208,7 +208,7 @@ def test_chunking_and_batching_do_not_change_the_volume() -> None:
     morph = EllipseMorphology(beta=0.7)
     tp = raster_cube(4.0, morph)
     a = deposit(tp, morph)
-    b = deposit(tp, morph, DepositionConfig(chunk_segments=7, batch_candidates=1000))
+    b = deposit(tp, morph, DepositionConfig(chunk_segments=7))
     assert a.grid == b.grid
     assert b.deposited_mm3 == pytest.approx(a.commanded_mm3, rel=1e-5)
     assert len(b.trace) > len(a.trace)
@@ -250,31 +250,3 @@ def test_center_offset_moves_the_filament_along_the_printing_direction() -> None
     assert dep.deposited_mm3 == pytest.approx(dep.commanded_mm3, rel=1e-5)
     with pytest.raises(InputError):
         DepositionConfig(center_offset=0.8)
-
-
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_nearest_over_full_voxel_matches_the_feature_transform(seed: int) -> None:
-    from scipy import ndimage
-
-    from sim.deposition import _nearest_over
-
-    rng = np.random.default_rng(seed)
-    shape, reach = (30, 24, 12), 3
-    over = np.zeros(shape, dtype=bool)
-    over[rng.integers(0, 30, 40), rng.integers(0, 24, 40), rng.integers(4, 8, 40)] = True
-    over[10:14, 5:15, 6] = True  # a sheet, as where a filament overlaps older ink
-    room = ~over & (rng.random(shape) < 0.7)
-    own, dst, d2 = _nearest_over(over, np.nonzero(over), room, reach)
-    # the whole-box Euclidean feature transform, as before
-    nearest = ndimage.distance_transform_edt(~over, return_distances=False,
-                                             return_indices=True)
-    idx = np.nonzero(room)
-    want_own = np.stack([nearest[a][idx] for a in range(3)], axis=1)
-    want_d2 = ((want_own - np.stack(idx, axis=1)) ** 2).sum(axis=1)
-    keep = want_d2 <= reach**2
-    got = {tuple(v): int(d) for v, d in zip(np.stack(dst, axis=1), d2, strict=True)}
-    want = {tuple(v): int(d) for v, d in zip(np.stack(idx, axis=1)[keep], want_d2[keep],
-                                              strict=True)}
-    assert got == want  # the same voxels within reach, at the same distance
-    assert np.all(over[own])  # paired with over-full voxels (ties may pick another)
-    assert np.array_equal(((np.stack(own, 1) - np.stack(dst, 1)) ** 2).sum(axis=1), d2)

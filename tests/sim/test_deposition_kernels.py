@@ -1,0 +1,124 @@
+"""The compiled deposition kernels against the dense operations they replace."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from sim import deposition_kernels as k
+from sim.voxels import closing_cube
+
+FULL, OVERFULL = 1.0 - 1e-5, 1.0 + 1e-5
+
+
+def _sheet(seed: int, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Over-full voxels (scattered, and a sheet as where a filament overlaps older ink), full
+    voxels and voxels with room; returns (flat fill, over-full mask)."""
+    rng = np.random.default_rng(seed)
+    over = np.zeros(shape, dtype=bool)
+    n = 40
+    over[rng.integers(0, shape[0], n), rng.integers(0, shape[1], n),
+         rng.integers(4, 8, n)] = True
+    over[10:14, 5:15, 6] = True
+    fill = np.where(rng.random(shape) < 0.7, 0.4, 1.0).astype(np.float32)
+    fill[over] = 1.5
+    return fill.reshape(-1), over
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_nearest_over_full_voxel_matches_the_feature_transform(seed: int) -> None:
+    shape, reach = (30, 24, 12), 3
+    fill, over = _sheet(seed, shape)
+    src = np.sort(np.flatnonzero(over))
+    ns = src.size
+    table = k.block_table(shape)
+    pool = np.empty((table.size, 512), dtype=np.int32)
+    blocks = np.empty(table.size, dtype=np.int64)
+    used = k._place_sources(table, pool, blocks, src, *shape)
+    current, parent, dirs = (np.empty(ns, dtype=bool), np.empty(ns, dtype=np.int64),
+                             np.empty(ns, dtype=np.int64))
+    k._regions(fill, src, OVERFULL, table, pool, *shape, current, parent, dirs, k._STEPS)
+    ids = k._IdArrays.new(ns + 8, src)  # tiny: the enumeration must resume after growing
+    first, ncand, nid, ball = 0, 0, ns, k._ball(reach)
+    while first < ns:
+        first, used, ncand, nid = k._enumerate(
+            first, fill, FULL, src, dirs, ball, k._direction_starts(ball), *shape, table, pool,
+            blocks, used, 1,
+            ids.vflat, ids.best, ids.owner, ids.stamp, ids.gap, ids.cand, ncand, nid)
+        if first < ns:
+            ids = ids.grown(nid + ball.shape[0])
+    k._release(table, blocks, used)
+    assert np.all(table == -1)
+    cand = ids.cand[:ncand]
+    got = dict(zip(ids.vflat[cand].tolist(), ids.best[cand].tolist(), strict=True))
+    # The whole-box Euclidean feature transform.
+    nearest = ndimage.distance_transform_edt(~over, return_distances=False, return_indices=True)
+    room = fill.reshape(shape) < FULL
+    idx = np.nonzero(room)
+    want_own = np.stack([nearest[a][idx] for a in range(3)], axis=1)
+    want_d2 = ((want_own - np.stack(idx, axis=1)) ** 2).sum(axis=1)
+    keep = want_d2 <= reach**2
+    want = dict(zip(np.ravel_multi_index(idx, shape)[keep].tolist(), want_d2[keep].tolist(),
+                    strict=True))
+    assert got == want  # the same voxels within reach, at the same distance
+    own = np.unravel_index(src[ids.owner[cand]], shape)
+    dst = np.unravel_index(ids.vflat[cand], shape)
+    assert np.array_equal(((np.stack(own, 1) - np.stack(dst, 1)) ** 2).sum(axis=1),
+                          ids.best[cand])  # paired with an over-full voxel at that distance
+
+
+def test_regions_are_the_26_connected_components() -> None:
+    shape = (30, 24, 12)
+    fill, over = _sheet(4, shape)
+    src = np.sort(np.flatnonzero(over))
+    table = k.block_table(shape)
+    pool = np.empty((table.size, 512), dtype=np.int32)
+    blocks = np.empty(table.size, dtype=np.int64)
+    used = k._place_sources(table, pool, blocks, src, *shape)
+    ns = src.size
+    current, parent, dirs = (np.empty(ns, dtype=bool), np.empty(ns, dtype=np.int64),
+                             np.empty(ns, dtype=np.int64))
+    k._regions(fill, src, OVERFULL, table, pool, *shape, current, parent, dirs, k._STEPS)
+    k._release(table, blocks, used)
+    roots = np.array([k._find(parent, i) for i in range(ns)])
+    labels, _ = ndimage.label(over, structure=np.ones((3, 3, 3)))
+    want = labels.reshape(-1)[src]
+    # same partition: a root per label and a label per root
+    assert len(set(zip(roots.tolist(), want.tolist(), strict=True))) == len(set(want.tolist()))
+    assert len(set(roots.tolist())) == len(set(want.tolist()))
+    assert np.all(dirs[over.reshape(-1)[src]] >= 0)
+
+
+@pytest.mark.parametrize(("radius", "seed"), [(1, 0), (2, 1), (3, 2), (2, 3)])
+def test_gap_flags_are_the_closing_of_the_ink(radius: int, seed: int) -> None:
+    shape = (21, 19, 26)  # not multiples of the block: partial blocks at the far faces
+    rng = np.random.default_rng(seed)
+    ink = ndimage.binary_dilation(rng.random(shape) < 0.02, iterations=1)
+    ink[:, :, :5] = True  # a floor reaching the grid's edge
+    fill = np.where(ink, 0.8, 0.1).astype(np.float32).reshape(-1)
+    cand = np.flatnonzero(fill < 2.0)
+    rng.shuffle(cand)
+    vflat = cand.copy()
+    ids = np.arange(cand.size, dtype=np.int64)
+    gap = np.full(cand.size, -1, dtype=np.int8)
+    k._gap_flags(fill, ids, vflat, gap, radius, *shape)
+    want = closing_cube(ink, radius).reshape(-1)[vflat]
+    assert np.array_equal(gap.astype(bool), want)
+
+
+def test_spread_conserves_ink_and_leaves_no_excess() -> None:
+    shape = (30, 24, 12)
+    fill, over = _sheet(5, shape)
+    total = float(fill.sum(dtype=np.float64))
+    tags = np.full(fill.size, -1, dtype=np.int32)
+    table = k.block_table(shape)
+    done = k.spread(fill, tags, shape, table, np.flatnonzero(over), 7, 2, 1, 6, FULL,
+                    OVERFULL)
+    assert np.all(table == -1)
+    assert fill.sum(dtype=np.float64) == pytest.approx(total, rel=1e-6)
+    assert done.residual < 1e-4 and fill.max() <= OVERFULL
+    assert done.displaced == pytest.approx(0.5 * over.sum(), rel=1e-5)
+    assert done.passes >= 1 and 0 < done.max_d2
+    assert np.all(tags[fill.reshape(-1) != np.where(over.reshape(-1), 1.5, 0)] >= -1)
+    assert np.any(tags == 7)
