@@ -29,10 +29,10 @@ Model (paper sections 3.1, 3.2):
   over-full regions (where a new filament overlaps older ink) push their excess into the
   nearest voxels with room, nearest first; gaps and grooves of the ink (free voxels a
   morphological closing of the ink bridges, up to ``gap_mm`` wide) are wetted first, since
-  the immiscible ink lowers its interface with the gel that way, and only then open gel. This is what makes a
-  volume-matched toolpath fill the gaps between filaments: the over-height of each filament
-  (h_f = H / beta) overlaps the layer below and is displaced into the gaps beside it; it is
-  also why stacked (non-staggered) rasters keep aligned voids and why the first layer, which
+  the immiscible ink lowers its interface with the gel that way, and only then open gel.
+  This is what makes a volume-matched toolpath fill the gaps between filaments: the
+  over-height of each filament (h_f = H / beta) overlaps the layer below and is displaced
+  into the gaps beside it; it is also why stacked (non-staggered) rasters keep aligned voids and why the first layer, which
   has nothing below to overlap, keeps its gaps (paper figure 3).
 * Not modelled: the printing angle's effect on w_f, h_f (alpha is kept near 90 deg by the
   planner), gel flow, curing shrinkage, nozzle drag.
