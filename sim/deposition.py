@@ -32,8 +32,9 @@ Model (paper sections 3.1, 3.2):
   the immiscible ink lowers its interface with the gel that way, and only then open gel.
   This is what makes a volume-matched toolpath fill the gaps between filaments: the
   over-height of each filament (h_f = H / beta) overlaps the layer below and is displaced
-  into the gaps beside it; it is also why stacked (non-staggered) rasters keep aligned voids and why the first layer, which
-  has nothing below to overlap, keeps its gaps (paper figure 3).
+  into the gaps beside it; it is also why stacked (non-staggered) rasters keep aligned voids
+  and why the first layer, which has nothing below to overlap, keeps its gaps (paper
+  figure 3).
 * Not modelled: the printing angle's effect on w_f, h_f (alpha is kept near 90 deg by the
   planner), gel flow, curing shrinkage, nozzle drag.
 
