@@ -122,3 +122,28 @@ def test_spread_conserves_ink_and_leaves_no_excess() -> None:
     assert done.passes >= 1 and 0 < done.max_d2
     assert np.all(tags[fill.reshape(-1) != np.where(over.reshape(-1), 1.5, 0)] >= -1)
     assert np.any(tags == 7)
+
+
+def test_counting_order_is_a_stable_sort() -> None:
+    rng = np.random.default_rng(6)
+    key = rng.integers(0, 9, 500)
+    order = rng.permutation(500)
+    got = k._counting_order(key, 9, order)
+    assert np.array_equal(got, order[np.argsort(key[order], kind="stable")])
+
+
+def test_add_ink_tags_the_voxels_that_gain_more_than_they_held() -> None:
+    fill = np.array([0.0, 0.5, 0.9, 0.2], dtype=np.float32)
+    tags = np.array([-1, 3, 3, 3], dtype=np.int32)
+    k.add_ink(fill, tags, np.array([0, 1, 2]), np.array([0.2, 1.0, 0.1]), 2.0, 4)
+    assert np.allclose(fill, [0.4, 2.5, 1.1, 0.2])
+    assert tags.tolist() == [4, 4, 3, 3]
+
+
+def test_a_closing_wider_than_the_kernels_handle_is_a_user_error() -> None:
+    from sim.deposition import DepositionConfig
+    from slicer.errors import InputError
+
+    DepositionConfig(voxel_mm=0.04, gap_mm=1.0)  # radius 12 voxels: fine
+    with pytest.raises(InputError, match="voxel of at least"):
+        DepositionConfig(voxel_mm=0.02, gap_mm=1.0)
