@@ -147,3 +147,46 @@ def test_a_closing_wider_than_the_kernels_handle_is_a_user_error() -> None:
     DepositionConfig(voxel_mm=0.04, gap_mm=1.0)  # radius 12 voxels: fine
     with pytest.raises(InputError, match="voxel of at least"):
         DepositionConfig(voxel_mm=0.02, gap_mm=1.0)
+
+
+def test_excess_walled_in_by_full_voxels_goes_further_out() -> None:
+    # An over-full voxel in a 9^3 block of full ink: no room within the first reach, so the
+    # neighbourhood doubles until it reaches the gel around the block.
+    shape = (21, 21, 21)
+    fill = np.zeros(shape, dtype=np.float32)
+    fill[6:15, 6:15, 6:15] = 1.0
+    fill[10, 10, 10] = 3.0
+    fill = fill.reshape(-1)
+    total = float(fill.sum(dtype=np.float64))
+    tags = np.full(fill.size, -1, dtype=np.int32)
+    over = np.array([np.ravel_multi_index((10, 10, 10), shape)])
+    done = k.spread(fill, tags, shape, k.block_table(shape), over, 1, 2, 1, 6, FULL, OVERFULL)
+    assert done.residual < 1e-5 and fill.max() <= OVERFULL
+    assert fill.sum(dtype=np.float64) == pytest.approx(total, rel=1e-6)
+    assert done.max_d2 >= 5**2  # the nearest gel is 5 voxels away
+
+
+def test_rasterise_keeps_the_volume_of_a_long_segment() -> None:
+    # One 30 mm segment on a 0.1 mm grid: more distinct voxels than the first guess of the
+    # output size, so the kernel resumes after growing its arrays.
+    shape = (320, 24, 24)
+    origin = np.array([-1.0, -1.2, -1.2])
+    start = np.array([[0.0, 0.0, 0.0]])
+    unit = np.array([[1.0, 0.0, 0.0]])
+    lateral, up = np.array([[0.0, 1.0, 0.0]]), np.array([[0.0, 0.0, 1.0]])
+    length, width, height = np.array([30.0]), np.array([1.2]), np.array([0.9])
+    volume = np.pi / 4 * width * height * length
+    vox = 0.1
+    ext = np.array([[0.0, 0.6, 0.45]]) + 0.5 * vox
+    vlo = np.ceil((start - ext - origin) / vox - 0.5).astype(np.int64)
+    vhi = np.floor((start + unit * length[:, None] + ext - origin) / vox - 0.5).astype(np.int64)
+    vlo, vhi = np.clip(vlo, 0, np.array(shape) - 1), np.clip(vhi, -1, np.array(shape) - 1)
+    table = k.block_table(shape)
+    flat, ink = k.rasterise(start, unit, lateral, up, length, width, height, volume, vlo, vhi,
+                            vlo, origin, vox, shape, table)
+    assert np.all(table == -1)
+    assert np.unique(flat).size == flat.size > 4096
+    assert ink.sum() == pytest.approx(volume[0], rel=1e-9)
+    # no voxel holds more than itself; the inner ones are full
+    assert ink.max() <= vox**3 * (1 + 1e-6)
+    assert np.count_nonzero(ink > 0.99 * vox**3) * vox**3 < volume[0] < flat.size * vox**3
