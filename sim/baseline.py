@@ -34,6 +34,8 @@ lines are the runs of grid rows that lie deep enough inside.
 
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Literal
 
@@ -214,25 +216,46 @@ def planar_toolpath(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     lo, hi = vertices[:, :2].min(axis=0) - 2 * g, vertices[:, :2].max(axis=0) + 2 * g
     x = np.arange(lo[0], hi[0] + g, g)
     y = np.arange(lo[1], hi[1] + g, g)
-    lines: list[tuple[NDArray[np.float64], int, int]] = []  # (points (n,3), layer, pattern)
-    for k in range(n_layers):
+
+    def layer_lines(k: int) -> list[tuple[NDArray[np.float64], int, int]]:
+        """(points (n, 3), layer, pattern) of the lines of layer ``k``, in print order."""
         z = zmin + (k + 0.5) * h
         inside = rasterise_section(section_segments(tri, z), x, y)
         if not inside.any():
-            continue
-        # Signed distance to the section edge (mm, > 0 inside); the edge lies half a cell
-        # beyond the last inside grid point.
-        sdf = np.where(inside, ndimage.distance_transform_edt(inside) - 0.5,
-                       0.5 - ndimage.distance_transform_edt(~inside)) * g
+            return []
+        sdf = _section_distance(inside) * g
         walls = _thin_walls(inside, x, y, width, config) if config.thin_walls else []
+        out = []
         for poly in _perimeters(sdf, x, y, width, config) + walls:
             pts = _resample(poly, config.spacing_mm)
-            lines.append((np.column_stack([pts, np.full(len(pts), z)]), k, PATTERN_CONTOUR))
+            out.append((np.column_stack([pts, np.full(len(pts), z)]), k, PATTERN_CONTOUR))
         angle = np.deg2rad(config.raster_angle_deg) + 0.5 * np.pi * (k % 2)
         for seg in _raster(sdf, x, y, width, config, along_x=abs(np.cos(angle)) > 0.5, flip=k):
             pts = _resample(seg, config.spacing_mm)
-            lines.append((np.column_stack([pts, np.full(len(pts), z)]), k, PATTERN_STRIPE))
+            out.append((np.column_stack([pts, np.full(len(pts), z)]), k, PATTERN_STRIPE))
+        return out
+
+    # Layers are independent and the distance transforms release the GIL: threads, in order.
+    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+        lines = [line for layer in pool.map(layer_lines, range(n_layers)) for line in layer]
     return _assemble(lines, h, width, speed)
+
+
+def _section_distance(inside: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """Signed distance to the section edge in grid steps (> 0 inside): the edge lies half a
+    step beyond the last inside grid point.
+
+    Outside, only the values next to the section are ever read (the perimeters are iso-lines
+    at positive levels, the raster ends interpolate between neighbours): the grid points
+    4-adjacent to an inside point are 1 step from it, the diagonal ones sqrt(2); the rest get
+    -1.5, which saves the outside's distance transform.
+    """
+    sdf = np.where(inside, ndimage.distance_transform_edt(inside) - 0.5, -1.5)
+    cross = ndimage.binary_dilation(inside) & ~inside
+    diagonal = ndimage.binary_dilation(inside, structure=np.ones((3, 3), dtype=bool))
+    sdf[diagonal & ~inside & ~cross] = 0.5 - np.sqrt(2.0)
+    sdf[cross] = -0.5
+    return sdf
 
 
 def _with_height(config: PlanarConfig, h: float) -> PlanarConfig:
@@ -272,8 +295,15 @@ def _thin_walls(inside: NDArray[np.bool_], x: NDArray[np.float64], y: NDArray[np
     if not holes.any():
         return []
     g = float(x[1] - x[0])
-    d_out = ndimage.distance_transform_edt(~outside) * g
     d_hole = ndimage.distance_transform_edt(~holes) * g
+    # A thin point p has d_out(p) + d_hole(p) - g < W; its nearest outside point o is
+    # 4-adjacent to the section (its neighbour towards p is nearer to p, so not outside, and
+    # not a hole, which would join the outside's component) and d_hole(o) < W + g. None such:
+    # no thin wall, and the outside's distance transform is not needed.
+    shore = outside & ndimage.binary_dilation(inside)
+    if not np.any(d_hole[shore] < width + g):
+        return []
+    d_out = ndimage.distance_transform_edt(~outside) * g
     # Grid distances run centre to centre: the wall is one cell thinner than their sum.
     thin = inside & (d_out + d_hole - g < width)
     if not thin.any():

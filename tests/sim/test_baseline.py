@@ -173,3 +173,33 @@ def test_thin_tube_wall_gets_one_centre_line() -> None:
         planar_toolpath(tube.vertices, tube.faces, morph,
                         PlanarConfig(layer_height_mm=0.6, beta=0.5, width_mode="volume",
                                      thin_walls=False))
+
+
+def test_section_distance_is_exact_where_it_is_read() -> None:
+    from scipy import ndimage
+
+    from sim.baseline import _section_distance
+
+    rng = np.random.default_rng(3)
+    inside = ndimage.binary_opening(ndimage.gaussian_filter(rng.random((80, 70)), 4) > 0.5)
+    inside[30:34, :] = False  # a slot, so some outside points see the section diagonally only
+    got = _section_distance(inside)
+    full = np.where(inside, ndimage.distance_transform_edt(inside) - 0.5,
+                    0.5 - ndimage.distance_transform_edt(~inside))
+    near = ndimage.binary_dilation(inside, structure=np.ones((3, 3), dtype=bool))
+    assert np.array_equal(got[near], full[near])
+    assert np.all(got[~near] <= -1.5 + 1e-12)
+
+
+def test_a_thick_tube_has_no_thin_wall_and_a_thin_one_has() -> None:
+    from sim.baseline import _thin_walls
+
+    n = 161
+    x = y = np.linspace(-8.0, 8.0, n)
+    r = np.hypot(*np.meshgrid(x, y, indexing="ij"))
+    cfg = PlanarConfig()
+    thick = (r > 3.0) & (r < 7.0)
+    thin = (r > 5.5) & (r < 6.5)
+    assert _thin_walls(thick, x, y, 2.0, cfg) == []
+    lines = _thin_walls(thin, x, y, 2.0, cfg)
+    assert lines and all(np.allclose(np.hypot(*p.T), 6.0, atol=0.1) for p in lines)
