@@ -190,3 +190,41 @@ def test_rasterise_keeps_the_volume_of_a_long_segment() -> None:
     # no voxel holds more than itself; the inner ones are full
     assert ink.max() <= vox**3 * (1 + 1e-6)
     assert np.count_nonzero(ink > 0.99 * vox**3) * vox**3 < volume[0] < flat.size * vox**3
+
+
+def test_a_later_pass_reassigns_voxels_whose_source_is_done() -> None:
+    shape, reach = (30, 24, 12), 3
+    fill, over = _sheet(7, shape)
+    src = np.sort(np.flatnonzero(over))
+    ns = src.size
+    table = k.block_table(shape)
+    pool = np.empty((table.size, 512), dtype=np.int32)
+    blocks = np.empty(table.size, dtype=np.int64)
+    used = k._place_sources(table, pool, blocks, src, *shape)
+    current, parent, dirs = (np.empty(ns, dtype=bool), np.empty(ns, dtype=np.int64),
+                             np.empty(ns, dtype=np.int64))
+    k._regions(fill, src, OVERFULL, table, pool, *shape, current, parent, dirs, k._STEPS)
+    ids = k._IdArrays.new(ns * 400, src)
+    ball = k._ball(reach)
+    _, used, ncand, _ = k._enumerate(
+        0, fill, FULL, src, dirs, ball, k._direction_starts(ball), *shape, table, pool, blocks,
+        used, 1, ids.vflat, ids.best, ids.owner, ids.stamp, ids.gap, ids.cand, 0, ns)
+    done = src[::2]  # half the sources shed their excess
+    fill[done] = 1.0
+    k._regions(fill, src, OVERFULL, table, pool, *shape, current, parent, dirs, k._STEPS)
+    kept = k._reassign(fill, FULL, src, current, k._by_distance(ball), *shape, table, pool,
+                       ids.vflat, ids.best, ids.owner, ids.cand[:ncand])
+    k._release(table, blocks, used)
+    cand = ids.cand[:kept]
+    still = over.copy().reshape(-1)
+    still[done] = False
+    still = still.reshape(shape)
+    nearest = ndimage.distance_transform_edt(~still, return_distances=False,
+                                             return_indices=True)
+    room = np.flatnonzero(fill < FULL)
+    own = np.stack([nearest[a].reshape(-1)[room] for a in range(3)], axis=1)
+    d2 = ((own - np.stack(np.unravel_index(room, shape), axis=1)) ** 2).sum(axis=1)
+    want = dict(zip(room[d2 <= reach**2].tolist(), d2[d2 <= reach**2].tolist(), strict=True))
+    got = dict(zip(ids.vflat[cand].tolist(), ids.best[cand].tolist(), strict=True))
+    assert got == want
+    assert np.all(current[ids.owner[cand]])
