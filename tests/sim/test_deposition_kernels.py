@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 import pytest
 from scipy import ndimage
@@ -26,19 +28,39 @@ def _sheet(seed: int, shape: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarr
     return fill.reshape(-1), over
 
 
+class _Mapped(NamedTuple):
+    """The over-full voxels of a fill placed in a block map, with their regions."""
+
+    src: np.ndarray
+    table: np.ndarray
+    pool: np.ndarray
+    blocks: np.ndarray
+    used: int
+    current: np.ndarray
+    parent: np.ndarray
+    dirs: np.ndarray
+
+    @staticmethod
+    def of(fill: np.ndarray, over: np.ndarray, shape: tuple[int, int, int]) -> _Mapped:
+        src = np.sort(np.flatnonzero(over))
+        table = k.block_table(shape)
+        pool = np.empty((table.size, 512), dtype=np.int32)
+        blocks = np.empty(table.size, dtype=np.int64)
+        used = k._place_sources(table, pool, blocks, src, *shape)
+        current, parent, dirs = (np.empty(src.size, dtype=bool),
+                                 np.empty(src.size, dtype=np.int64),
+                                 np.empty(src.size, dtype=np.int64))
+        k._regions(fill, src, OVERFULL, table, pool, *shape, current, parent, dirs, k._STEPS)
+        return _Mapped(src, table, pool, blocks, used, current, parent, dirs)
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_nearest_over_full_voxel_matches_the_feature_transform(seed: int) -> None:
     shape, reach = (30, 24, 12), 3
     fill, over = _sheet(seed, shape)
-    src = np.sort(np.flatnonzero(over))
-    ns = src.size
-    table = k.block_table(shape)
-    pool = np.empty((table.size, 512), dtype=np.int32)
-    blocks = np.empty(table.size, dtype=np.int64)
-    used = k._place_sources(table, pool, blocks, src, *shape)
-    current, parent, dirs = (np.empty(ns, dtype=bool), np.empty(ns, dtype=np.int64),
-                             np.empty(ns, dtype=np.int64))
-    k._regions(fill, src, OVERFULL, table, pool, *shape, current, parent, dirs, k._STEPS)
+    m = _Mapped.of(fill, over, shape)
+    src, ns, table, pool, blocks, used = m.src, m.src.size, m.table, m.pool, m.blocks, m.used
+    dirs = m.dirs
     ids = k._IdArrays.new(ns + 8, src)  # tiny: the enumeration must resume after growing
     first, ncand, nid, ball = 0, 0, ns, k._ball(reach)
     while first < ns:
@@ -195,15 +217,9 @@ def test_rasterise_keeps_the_volume_of_a_long_segment() -> None:
 def test_a_later_pass_reassigns_voxels_whose_source_is_done() -> None:
     shape, reach = (30, 24, 12), 3
     fill, over = _sheet(7, shape)
-    src = np.sort(np.flatnonzero(over))
-    ns = src.size
-    table = k.block_table(shape)
-    pool = np.empty((table.size, 512), dtype=np.int32)
-    blocks = np.empty(table.size, dtype=np.int64)
-    used = k._place_sources(table, pool, blocks, src, *shape)
-    current, parent, dirs = (np.empty(ns, dtype=bool), np.empty(ns, dtype=np.int64),
-                             np.empty(ns, dtype=np.int64))
-    k._regions(fill, src, OVERFULL, table, pool, *shape, current, parent, dirs, k._STEPS)
+    m = _Mapped.of(fill, over, shape)
+    src, ns, table, pool, blocks, used = m.src, m.src.size, m.table, m.pool, m.blocks, m.used
+    current, parent, dirs = m.current, m.parent, m.dirs
     ids = k._IdArrays.new(ns * 400, src)
     ball = k._ball(reach)
     _, used, ncand, _ = k._enumerate(
