@@ -124,7 +124,8 @@ class DepositionConfig:
         pad_mm: float, mm, free margin around the job in an automatic grid.
         spread_margin_mm: float, mm, how far from an over-full voxel its excess ink may be
             pushed in the first attempt (the neighbourhood searched for voxels with room; it
-            doubles while a neighbourhood is full, up to the whole grid).
+            doubles while a neighbourhood is full, up to 64 voxels: excess with no room
+            within that is left over-full and the deposit's status is "overfull").
         max_passes: int, nearest-free-voxel passes per chunk and neighbourhood.
         chunk_segments: int, at most this many segments are rasterised before spreading.
         gap_mm: float, mm, excess goes first into gaps and grooves of the ink up to about this

@@ -700,8 +700,9 @@ def spread(fill: NDArray[np.float32], tags: NDArray[np.int32], shape: tuple[int,
     gaps and grooves of the ink (voxels a morphological closing of the ink, f >= 0.5, by a
     (2 closing + 1)^3 cube fills) come first: the first pass offers them only, later passes all
     room, gaps before open gel. What a region cannot place goes on in another pass (at most
-    ``max_passes``); when the neighbourhood runs out of room ``reach`` doubles, up to the
-    whole grid. Voxels gaining more ink than they held are tagged ``layer``.
+    ``max_passes``); when the neighbourhood runs out of room ``reach`` doubles, up to
+    ``MAX_REACH`` voxels and ``MAX_BALL_VISITS``; excess still without room is left in place
+    and returned as ``residual``. Voxels gaining more ink than they held are tagged ``layer``.
 
     Args:
         fill: (nx * ny * nz,) float32, ink fraction, updated in place; tags: (same,) int32.
@@ -760,9 +761,8 @@ def spread(fill: NDArray[np.float32], tags: NDArray[np.int32], shape: tuple[int,
                     while True:
                         first, used, ncand, nid = _enumerate(
                             first, fill, full, src, open_dirs, ball, starts, nx, ny, nz,
-                            table, pool,
-                            blocks, used, sweep, ids.vflat, ids.best, ids.owner, ids.stamp,
-                            ids.gap, ids.cand, ncand, nid)
+                            table, pool, blocks, used, sweep, ids.vflat, ids.best, ids.owner,
+                            ids.stamp, ids.gap, ids.cand, ncand, nid)
                         if first == ns:
                             break
                         ids = ids.grown(nid + ball.shape[0])
@@ -796,9 +796,13 @@ def spread(fill: NDArray[np.float32], tags: NDArray[np.int32], shape: tuple[int,
         finally:
             _release(table, blocks, used)
         src = src[fill[src] > overfull]
-        if src.size == 0 or reach >= diag:
+        wider = min(2 * reach, diag)
+        # The ball grows with the cube of the reach: stop at a bounded cost and report what
+        # is left (a pathological job, e.g. ink walled in by ink over centimetres).
+        if (src.size == 0 or wider == reach or wider > MAX_REACH
+                or src.size * 4.2 * wider**3 > MAX_BALL_VISITS):
             break
-        reach = min(2 * reach, diag)
+        reach = wider
     ink = fill[over]
     residual = float(np.clip(ink - 1.0, 0.0, None).sum(dtype=np.float64))
     return Spread(displaced or 0.0, passes, max_d2, residual)
@@ -806,6 +810,9 @@ def spread(fill: NDArray[np.float32], tags: NDArray[np.int32], shape: tuple[int,
 
 # The closing's bit columns hold a block and twice its margin on each side: 8 + 4 r <= 62.
 MAX_CLOSING = 13
+# How far a neighbourhood may grow (voxels), and the ball visits a growth may cost.
+MAX_REACH = 64
+MAX_BALL_VISITS = 300_000_000
 
 
 class _IdArrays(NamedTuple):

@@ -244,3 +244,15 @@ def test_a_later_pass_reassigns_voxels_whose_source_is_done() -> None:
     got = dict(zip(ids.vflat[cand].tolist(), ids.best[cand].tolist(), strict=True))
     assert got == want
     assert np.all(current[ids.owner[cand]])
+
+
+def test_excess_with_no_room_anywhere_is_left_and_reported() -> None:
+    shape = (40, 40, 40)
+    fill = np.ones(shape, dtype=np.float32).reshape(-1)  # no room in the whole grid
+    centre = np.ravel_multi_index((20, 20, 20), shape)
+    fill[centre] = 3.0
+    tags = np.full(fill.size, -1, dtype=np.int32)
+    done = k.spread(fill, tags, shape, k.block_table(shape), np.array([centre]), 1, 2, 1, 6,
+                    FULL, OVERFULL)
+    assert done.residual == pytest.approx(2.0)
+    assert fill[centre] == pytest.approx(3.0) and done.passes == 0
