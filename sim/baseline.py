@@ -295,12 +295,15 @@ def _thin_walls(inside: NDArray[np.bool_], x: NDArray[np.float64], y: NDArray[np
     if not holes.any():
         return []
     g = float(x[1] - x[0])
-    d_hole = ndimage.distance_transform_edt(~holes) * g
     # A thin point p has d_out(p) + d_hole(p) - g < W; its nearest outside point o is
     # 4-adjacent to the section (its neighbour towards p is nearer to p, so not outside, and
     # not a hole, which would join the outside's component) and d_hole(o) < W + g. None such:
-    # no thin wall, and the outside's distance transform is not needed.
+    # no thin wall, and the outside's distance transform is not needed. Checked on blocks of
+    # cells first (a lower bound of d_hole, 16 times cheaper), then exactly.
     shore = outside & ndimage.binary_dilation(inside)
+    if not np.any(_hole_distance_bound(holes)[shore] * g < width + g):
+        return []
+    d_hole = ndimage.distance_transform_edt(~holes) * g
     if not np.any(d_hole[shore] < width + g):
         return []
     d_out = ndimage.distance_transform_edt(~outside) * g
@@ -325,6 +328,21 @@ def _thin_walls(inside: NDArray[np.bool_], x: NDArray[np.float64], y: NDArray[np
                                                   axis=1).sum() >= config.min_line_mm:
                 out.append(piece)
     return out
+
+
+def _hole_distance_bound(holes: NDArray[np.bool_], block: int = 4) -> NDArray[np.float64]:
+    """A lower bound of each cell's distance to ``holes`` (cells), from a distance transform
+    on ``block`` x ``block`` blocks: a cell and a hole cell lie within block / sqrt(2) of
+    their blocks' centres, so the cells are at least (block distance - sqrt(2)) * block apart.
+    """
+    nx, ny = holes.shape
+    bx, by = -(-nx // block), -(-ny // block)
+    padded = np.zeros((bx * block, by * block), dtype=bool)
+    padded[:nx, :ny] = holes
+    coarse = padded.reshape(bx, block, by, block).any(axis=(1, 3))
+    bound = (ndimage.distance_transform_edt(~coarse) - np.sqrt(2.0)) * block
+    full = np.repeat(np.repeat(bound, block, axis=0), block, axis=1)[:nx, :ny]
+    return np.asarray(full, dtype=np.float64)
 
 
 def _raster(sdf: NDArray[np.float64], x: NDArray[np.float64], y: NDArray[np.float64],

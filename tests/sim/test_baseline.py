@@ -203,3 +203,17 @@ def test_a_thick_tube_has_no_thin_wall_and_a_thin_one_has() -> None:
     assert _thin_walls(thick, x, y, 2.0, cfg) == []
     lines = _thin_walls(thin, x, y, 2.0, cfg)
     assert lines and all(np.allclose(np.hypot(*p.T), 6.0, atol=0.1) for p in lines)
+
+
+def test_hole_distance_bound_is_a_lower_bound() -> None:
+    from scipy import ndimage
+
+    from sim.baseline import _hole_distance_bound
+
+    rng = np.random.default_rng(5)
+    holes = ndimage.binary_opening(ndimage.gaussian_filter(rng.random((63, 50)), 3) > 0.56)
+    exact = ndimage.distance_transform_edt(~holes)
+    bound = _hole_distance_bound(holes)
+    assert bound.shape == holes.shape
+    assert np.all(bound <= exact + 1e-9)
+    assert bound.max() > 0.5 * exact.max()  # and not a useless one
