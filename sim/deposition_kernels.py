@@ -368,20 +368,15 @@ def _regions(fill: NDArray[np.float32], src: NDArray[np.int64], overfull: float,
 
 
 @njit(cache=True)
-def _open_offsets(dirs: int, starts: NDArray[np.int64]) -> NDArray[np.int64]:
-    """The ball rows of the directions set in ``dirs``."""
-    n = 0
-    for d in range(27):
-        if (dirs >> d) & 1:
-            n += starts[d + 1] - starts[d]
-    out = np.empty(n, dtype=np.int64)
+def _open_offsets(dirs: int, starts: NDArray[np.int64], out: NDArray[np.int64]) -> int:
+    """Write the ball rows of the directions set in ``dirs`` to ``out``; returns how many."""
     n = 0
     for d in range(27):
         if (dirs >> d) & 1:
             for o in range(starts[d], starts[d + 1]):
                 out[n] = o
                 n += 1
-    return out
+    return n
 
 
 @njit(cache=True, nogil=True)
@@ -402,6 +397,7 @@ def _enumerate(first: int, fill: NDArray[np.float32], full: float, src: NDArray[
     nby = (ny + _MASK) >> BLOCK_BITS
     nbz = (nz + _MASK) >> BLOCK_BITS
     room = ball.shape[0]
+    rows = np.empty(room, dtype=np.int64)
     for i in range(first, src.size):
         dirs = open_dirs[i]
         if dirs == 0:
@@ -409,7 +405,8 @@ def _enumerate(first: int, fill: NDArray[np.float32], full: float, src: NDArray[
         if nid + room > vflat.size:
             return i, used, ncand, nid
         x, y, z = src[i] // (ny * nz), (src[i] // nz) % ny, src[i] % nz
-        for o in _open_offsets(dirs, starts):
+        for t in range(_open_offsets(dirs, starts, rows)):
+            o = rows[t]
             a, b, d = x + ball[o, 0], y + ball[o, 1], z + ball[o, 2]
             if a < 0 or a >= nx or b < 0 or b >= ny or d < 0 or d >= nz:
                 continue
