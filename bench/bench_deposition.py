@@ -9,6 +9,8 @@ metrics and the peak resident memory.
 
     .venv/bin/python bench/bench_deposition.py [--waypoints 500000] [--voxel 0.25] [--metrics]
     .venv/bin/python bench/bench_deposition.py --job out/socket --layers 100:120 --voxel 0.25
+    .venv/bin/python bench/bench_deposition.py --job out/socket --voxel 0.25 \
+        --max-voxels 300000000   # the whole socket: a 252 M-voxel grid, ~2.4 GB
 """
 
 from __future__ import annotations
