@@ -6,7 +6,7 @@ over-full voxels lie in a box of 11.6 M. Dense array operations over the box (fi
 labelling, feature transforms) cost ~50 ns per box voxel, 90% of the time. These kernels visit
 only the voxels near the sheet and key them through a sparse block map: the grid is split into
 8^3-voxel blocks, a table (one int32 per block, ``block_table``) points to a row of 512 slots
-allocated on first touch. The table is shared by the calls of one deposit and left all -1 on
+allocated on first touch. A deposit keeps one table per thread; each call leaves it all -1 on
 return, so a call costs what it touches, never the box.
 
 All voxel indices are flat indices of the C-ordered ``(nx, ny, nz)`` grid.

@@ -204,7 +204,7 @@ def test_bad_inputs() -> None:
         VoxelGrid.around(np.zeros(3), np.full(3, 1000.0), 0.05)
 
 
-def test_chunking_does_not_change_the_volume_and_a_rerun_the_deposit() -> None:
+def test_chunking_keeps_the_volume_and_a_rerun_gives_the_same_deposit() -> None:
     morph = EllipseMorphology(beta=0.7)
     tp = raster_cube(4.0, morph)
     a = deposit(tp, morph)
