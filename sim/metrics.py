@@ -13,12 +13,15 @@ so a surface through voxel centres is not counted as a whole voxel in or out; V_
 * pore ratio = gel volume inside the printed body / V_m, where the printed body is the solid
   (f >= 0.5) closed over narrow openings (``scan_bridge_mm``) with its cavities filled, minus
   its one-voxel skin (a CT sees the skin's partial voxels as surface roughness, not
-  porosity), and only where the model is solid (a cavity of the design is not a pore); the
-  gel there is sum of (1 - f).
+  porosity), and only where the model is solid; the gel there is sum of (1 - f). A cavity of
+  the design (space the model encloses, like the membrane's air chamber) is not filled: gel
+  connected to it is that cavity's surface, as gel connected to the outside is the outer
+  surface (grooves between the filaments of a cavity's ceiling are surface error, not pores).
 * over-deposition = ink beyond the model's share (sum of f - min(f, m)) / V_m;
   under-deposition = 1 - infill ratio.
-* surface error: distance from the printed body's outer surface (the f = 0.5 iso-surface of the
-  printed body above, at sub-voxel precision; what a 3D scanner sees) to the model surface:
+* surface error: distance from the printed body's surface (the f = 0.5 iso-surface of the
+  printed body above, at sub-voxel precision; what a 3D scanner sees, the walls of a designed
+  cavity included, as a CT would) to the model surface:
   mean, p95, max of its absolute value (mm), computed exactly against the model triangles.
 * error map: at points on the model surface, the signed distance to the printed surface
   (> 0 where ink lies outside the model, < 0 where the print falls short).
@@ -38,7 +41,7 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from sim.deposition import Deposit
-from sim.voxels import VoxelGrid, closing_cube, iso_points, voxelize_mesh
+from sim.voxels import VoxelGrid, closing_cube, fill_enclosed, iso_points, voxelize_mesh
 from slicer.stages import Toolpath
 
 
@@ -47,7 +50,7 @@ class SurfaceError:
     """Distances between the printed and the model surface.
 
     Attributes:
-        points: (P, 3) float64, mm, points of the printed outer surface.
+        points: (P, 3) float64, mm, points of the printed surface (outer, and of designed cavities).
         distance: (P,) float64, mm, signed distance of each point to the model surface
             (> 0 outside the model).
         map_points: (Q, 3) float64, mm, sample points on the model surface.
@@ -185,11 +188,13 @@ def inspect_deposit(deposit: Deposit, vertices: NDArray[np.float64],
                        else float("nan"))
     ink_out = float((deposit.fill - shared).sum(dtype=np.float64)) * vv
     solid = deposit.fill >= 0.5
-    # Like a scan: openings narrower than ~2 * scan_bridge_mm are bridged, then cavities filled.
+    # Like a scan: openings narrower than ~2 * scan_bridge_mm are bridged, then cavities
+    # filled, except the cavities of the design (the membrane's air chamber): gel connected
+    # to one is that cavity's surface, as gel connected to the outside is the outer surface
     bridge = round(scan_bridge_mm / grid.voxel)
-    body = ndimage.binary_fill_holes(closing_cube(solid, bridge) | solid)
-    # gel counts only where the model is solid: a cavity of the design (the membrane's air
-    # chamber) is enclosed by the print too, but it is not a defect
+    cavity = fill_enclosed(inside) & ~inside
+    body = fill_enclosed(closing_cube(solid, bridge) | solid, cavity if cavity.any() else None)
+    # gel counts only where the model is solid (a print that fills a designed cavity)
     core = ndimage.binary_erosion(body) & inside
     gel = np.where(core, 1.0 - f, 0.0)
     pores = core & ~solid

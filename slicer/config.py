@@ -158,7 +158,8 @@ class SlicingConfig:
 class ToolpathConfig:
     first_pattern: Literal["contour", "stripe"] = "contour"
     waypoint_spacing: float = 0.333
-    deformation_iterations: int = 6
+    deformation_iterations: int = 200
+    deformation_tolerance: float = 0.01
     volume_tolerance: float = 0.005
     min_path_length_mm: float = 1.0
     join_factor: float = 3.0
@@ -177,6 +178,8 @@ class ToolpathConfig:
             raise ValueError("waypoint_spacing must be in [0.02, 2] (fraction of W)")
         if self.deformation_iterations < 0:
             raise ValueError("deformation_iterations must be >= 0")
+        if not 0.0 <= self.deformation_tolerance <= 0.2:
+            raise ValueError("deformation_tolerance must be in [0, 0.2] (relative scale error)")
         if not 0 < self.volume_tolerance < 0.2:
             raise ValueError("volume_tolerance must be in (0, 0.2)")
         if self.min_path_length_mm < 0:

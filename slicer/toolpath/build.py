@@ -683,7 +683,8 @@ def _component_toolpath_unsafe(
     deformed = comp.vertices
     if spread > DEFORM_SPREAD and cfg.deformation_iterations > 0:
         res = deform_to_constant_width(comp.vertices, comp.faces, comp.width,
-                                       cfg.deformation_iterations)
+                                       cfg.deformation_iterations,
+                                       scale_tol=cfg.deformation_tolerance)
         deform_status = str(res.status)
         if np.all(np.isfinite(res.vertices)):
             deformed = np.asarray(res.vertices, dtype=np.float64)

@@ -7,6 +7,14 @@ Eq. 13 is solved by local-global iterations (ARAP style, [47]): the local step i
 rotation per face (Kabsch; for planar triangles the 2x2 SVD has a closed form, vectorised),
 the global step a sparse least-squares solve whose matrix depends only on connectivity and
 the face areas and is factored once (sparse Cholesky). One vertex per component is pinned.
+
+How many iterations: the solve stops once the achieved scale is within ``scale_tol`` of the
+target on 90 % of the area (what the toolpath's width error sees), or when the energy stops
+falling. A fixed handful is not enough where W varies a lot: on the membrane's dome layers
+(W 1.0-6.9 mm within one layer) 6 iterations left the achieved scale 25-200 % off the target
+on a quarter of the faces and the stripe width error p50 at 33 %; iterating to convergence
+(130-170 iterations, 2-3 s per layer) brings it to 14 %. Where W is nearly constant (the
+socket: 1.4 % off before any iteration) one or two iterations reach the tolerance.
 """
 
 from __future__ import annotations
@@ -20,7 +28,7 @@ from numpy.typing import NDArray
 from slicer.errors import InputError
 from slicer.toolpath.surface import check_mesh, components, face_normals, spd_solver
 
-Status = Literal["converged", "max_iterations"]
+Status = Literal["converged", "within_tolerance", "max_iterations"]
 
 
 class DeformResult(NamedTuple):
@@ -29,8 +37,11 @@ class DeformResult(NamedTuple):
     vertices: (n, 3) float64 mm, deformed layer (same connectivity as the input).
     scale:    (m,) float64, target per-face scale s_f (eq. 14).
     achieved: (m,) float64, achieved per-face scale sqrt(area_deformed / area).
-    status:   "converged" (relative energy change below ``rtol``) or "max_iterations".
+    status:   "within_tolerance" (achieved scale within ``scale_tol`` of the target on 90 % of
+              the area), "converged" (relative energy change below ``rtol``) or
+              "max_iterations".
     trace:    (k,) float64 mm^2, energy of eq. 13 after each iteration.
+    deviation: float, area-weighted p90 of |achieved / scale - 1| at the result.
     """
 
     vertices: NDArray[np.float64]
@@ -38,6 +49,24 @@ class DeformResult(NamedTuple):
     achieved: NDArray[np.float64]
     status: Status
     trace: NDArray[np.float64]
+    deviation: float
+
+
+def scale_deviation(vertices: NDArray[np.float64], faces: NDArray[np.int64],
+                    area: NDArray[np.float64], scale: NDArray[np.float64]
+                    ) -> tuple[float, NDArray[np.float64]]:
+    """Area-weighted p90 of |achieved / target - 1| and the achieved per-face scale (m,).
+
+    vertices: (n, 3) float64 mm, the deformed layer; area: (m,) float64 mm^2, the faces'
+    areas before deformation; scale: (m,) target per-face scale s_f.
+    """
+    _, area_d = face_normals(vertices, faces)
+    achieved = np.sqrt(area_d / np.maximum(area, 1e-300))
+    dev = np.abs(achieved / scale - 1.0)
+    order = np.argsort(dev)
+    cum = np.cumsum(area[order])
+    at = min(int(np.searchsorted(cum, 0.9 * cum[-1])), len(order) - 1)
+    return float(dev[order[at]]), achieved
 
 
 def face_scale(vertices: NDArray[np.float64], faces: NDArray[np.integer],
@@ -99,12 +128,15 @@ def _planar_targets(src2: NDArray[np.float64], cur: NDArray[np.float64],
 
 def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.integer],
                              width: NDArray[np.float64], iterations: int = 30,
-                             rtol: float = 1e-4, anderson: int = 5) -> DeformResult:
+                             rtol: float = 1e-4, anderson: int = 5,
+                             scale_tol: float = 0.0) -> DeformResult:
     """Deform the layer so that the per-vertex target width becomes constant (eqs. 13, 14).
 
     vertices: (n, 3) float64 mm; faces: (m, 3) int; width: (n,) float64 mm > 0, target
     toolpath width W(x) per vertex; iterations: maximum local-global iterations; anderson:
-    history length of the Anderson acceleration (0 = plain local-global). Faces are
+    history length of the Anderson acceleration (0 = plain local-global); scale_tol: stop
+    once the achieved scale is within this of the target (relative) on 90 % of the area
+    (0: iterate until the energy converges or ``iterations`` run out). Faces are
     weighted by their area (a discretisation-independent form of eq. 13). One vertex per
     component is pinned during the solve and each component is translated back to its
     input centroid.
@@ -118,6 +150,8 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
                          "compute W = C / (H f(H / beta)) for every layer vertex")
     if iterations < 1:
         raise InputError(f"iterations must be >= 1, got {iterations}", "use e.g. 10")
+    if not 0.0 <= scale_tol < 1.0:
+        raise InputError(f"scale_tol must be in [0, 1), got {scale_tol}", "use e.g. 0.01")
     n, m = len(v), len(f)
     used = np.unique(f)
     scale = face_scale(v, f, w)
@@ -170,9 +204,13 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
     hist_f: list[NDArray[np.float64]] = []
     g_prev: NDArray[np.float64] | None = None
     f_prev: NDArray[np.float64] | None = None
+    deviation, _ = scale_deviation(x, f, area, scale)
     for _ in range(iterations):
         if energy <= floor:
             status = "converged"
+            break
+        if deviation <= scale_tol:
+            status = "within_tolerance"
             break
         g = global_step(target, x)
         res = (g - x)[free].ravel()
@@ -196,13 +234,16 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
         previous = energy
         x, target, energy = cand, cand_target, cand_energy
         trace.append(energy)
+        deviation, _ = scale_deviation(x, f, area, scale)
+        if deviation <= scale_tol:
+            status = "within_tolerance"
+            break
         if energy <= floor or abs(previous - energy) <= rtol * max(previous, 1e-300):
             status = "converged"
             break
     for comp in components(f):  # each piece moves back to its own centroid
         ids = np.unique(f[comp])
         x[ids] += v[ids].mean(axis=0) - x[ids].mean(axis=0)
-    _, area_d = face_normals(x, f)
-    achieved = np.sqrt(area_d / np.maximum(area, 1e-300))
+    deviation, achieved = scale_deviation(x, f, area, scale)
     return DeformResult(vertices=x, scale=scale, achieved=achieved, status=status,
-                        trace=np.asarray(trace))
+                        trace=np.asarray(trace), deviation=deviation)

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
+from scipy import ndimage
 
 from sim.deposition import Deposit
 from sim.metrics import inspect_deposit, model_fraction
-from sim.voxels import VoxelGrid, closing_cube, iso_points, voxelize_mesh
+from sim.voxels import VoxelGrid, closing_cube, fill_enclosed, iso_points, voxelize_mesh
 from slicer.stages import Toolpath
 
 
@@ -145,6 +146,52 @@ def test_cavity_of_the_design_is_not_a_pore() -> None:
     q = inspect_deposit(_deposit_of(np.clip(fill - pocket, 0, 1), grid), shell.vertices,
                         shell.faces)
     assert q.pore_ratio == pytest.approx(4.0 / (512.0 - 64.0), rel=0.1)
+
+
+def _hollow_box() -> trimesh.Trimesh:
+    outer = _box((0.0, 0.0, 0.0), (8.0, 8.0, 8.0))
+    chamber = _box((2.0, 2.0, 2.0), (6.0, 6.0, 6.0))
+    chamber.invert()  # inward-facing: the model is the shell between the two boxes
+    return trimesh.util.concatenate([outer, chamber])
+
+
+def test_a_groove_on_a_designed_cavity_is_surface_error_not_a_pore() -> None:
+    """A 0.5 mm deep groove in the chamber's ceiling opens into the chamber: like a groove on
+    the outer surface it is the surface falling short, not gel trapped in the print; the same
+    groove sealed off from the chamber by a 0.5 mm skin is a pore."""
+    grid = VoxelGrid(origin=(-2.0, -2.0, -2.0), voxel=0.25, shape=(48, 48, 48))
+    shell = _hollow_box()
+    fill = model_fraction(shell, grid)
+    groove = model_fraction(_box((3.0, 2.0, 6.0), (5.0, 6.0, 6.5)), grid)  # 4 mm^3
+    q = inspect_deposit(_deposit_of(np.clip(fill - groove, 0, 1), grid), shell.vertices,
+                        shell.faces)
+    assert q.pore_ratio == pytest.approx(0.0, abs=1e-6)
+    assert q.infill_ratio == pytest.approx(1.0 - 4.0 / 448.0, rel=1e-3)
+    # the chamber's walls are measured: the groove's floor lies 0.5 mm from the model
+    assert q.surface.stats()["max"] == pytest.approx(0.5, abs=0.1)
+    ceiling = (np.abs(q.surface.map_points[:, 2] - 6.0) < 0.01) & (
+        np.abs(q.surface.map_points[:, 0] - 4.0) < 0.8)
+    assert ceiling.any()
+    assert np.median(q.surface.map_distance[ceiling]) == pytest.approx(-0.5, abs=0.1)
+    sealed = model_fraction(_box((3.0, 2.5, 6.5), (5.0, 5.5, 7.0)), grid)  # 3 mm^3
+    q = inspect_deposit(_deposit_of(np.clip(fill - sealed, 0, 1), grid), shell.vertices,
+                        shell.faces)
+    assert q.pore_ratio == pytest.approx(3.0 / 448.0, rel=0.1)
+
+
+def test_fill_enclosed_matches_scipy_and_keeps_seeded_cavities_open() -> None:
+    rng = np.random.default_rng(3)
+    mask = ndimage.binary_dilation(rng.random((30, 24, 20)) < 0.03) | (
+        rng.random((30, 24, 20)) < 0.35)
+    assert np.array_equal(fill_enclosed(mask), ndimage.binary_fill_holes(mask))
+    shell = np.ones((9, 9, 9), dtype=bool)
+    shell[2:7, 2:7, 2:7] = False
+    shell[4, 4, 4] = True
+    assert fill_enclosed(shell).all()
+    seeds = np.zeros_like(shell)
+    seeds[3, 3, 3] = True
+    kept = fill_enclosed(shell, seeds)
+    assert np.array_equal(kept, shell)
 
 
 def test_per_layer_attribution_adds_up() -> None:

@@ -36,6 +36,7 @@ def test_job_file_overrides_defaults(tmp_path: Path) -> None:
         ("[slicing\n", "not valid TOML"),
         ("[slicing]\ncritical = ['sideways']\n", "not understood"),
         ("[toolpath]\nboundary_distance = 'exact'\n", "boundary_distance"),
+        ("[toolpath]\ndeformation_tolerance = 0.5\n", "deformation_tolerance"),
         ("[slicing]\ncritical = ['bottom@q<1']\n", "condition '@q<1' is not understood"),
         ("[slicing]\ncritical = ['bottom@z<1e']\n", "bad number"),
     ],

@@ -52,12 +52,48 @@ def test_variable_width_evens_out_the_effective_width() -> None:
         float((wf * face_normals(v, f)[1]).sum() / face_normals(v, f)[1].sum()) / wf)
 
 
+def test_scale_deviation_of_a_uniformly_scaled_layer() -> None:
+    v, f = disc(5.0, 1.0)
+    f = f.astype(np.int64)
+    _, area = face_normals(v, f)
+    ones = np.ones(len(f))
+    assert deform.scale_deviation(2.0 * v, f, area, 2.0 * ones)[0] == pytest.approx(0.0, abs=1e-9)
+    dev, achieved = deform.scale_deviation(2.0 * v, f, area, ones)
+    assert dev == pytest.approx(1.0) and np.allclose(achieved, 2.0)
+
+
+def test_tolerance_stops_the_iterations_once_the_scale_is_reached() -> None:
+    v, f = disc(12.0, 0.8)
+    v = dome(v, 3.0, 12.0)
+    w = 1.2 + 0.05 * np.linalg.norm(v[:, :2], axis=1)
+    full = deform.deform_to_constant_width(v, f, w, iterations=300)
+    res = deform.deform_to_constant_width(v, f, w, iterations=300, scale_tol=0.02)
+    assert res.status == "within_tolerance"
+    assert res.deviation <= 0.02 < deform.deform_to_constant_width(v, f, w, 1).deviation
+    assert 0 < len(res.trace) < len(full.trace)
+    assert full.deviation <= res.deviation
+    # what the deviation reports is the achieved scale against eq. 14's
+    dev = np.abs(res.achieved / res.scale - 1.0)
+    _, area = face_normals(v, f)
+    assert np.sum(area[dev <= res.deviation + 1e-12]) >= 0.9 * area.sum()
+
+
+def test_a_layer_already_within_tolerance_is_not_moved() -> None:
+    v, f = disc(6.0, 1.0)
+    w = np.full(len(v), 2.0) + 0.001 * v[:, 0]  # 0.3 % spread: within 1 %
+    res = deform.deform_to_constant_width(v, f, w, iterations=50, scale_tol=0.01)
+    assert res.status == "within_tolerance" and len(res.trace) == 0
+    assert np.array_equal(res.vertices, v)
+
+
 def test_deform_rejects_bad_width() -> None:
     v, f = disc(5.0, 1.0)
     with pytest.raises(InputError):
         deform.deform_to_constant_width(v, f, np.zeros(len(v)), 3)
     with pytest.raises(InputError):
         deform.deform_to_constant_width(v, f, np.ones(3), 3)
+    with pytest.raises(InputError):
+        deform.deform_to_constant_width(v, f, np.ones(len(v)), 3, scale_tol=-0.1)
 
 
 def test_planar_local_step_matches_the_svd_rotation() -> None:
