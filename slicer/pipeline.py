@@ -170,6 +170,7 @@ def _slice(
         "o_align": [float(x) for x in result.trace.o_align],
         "height_std_per_iteration_mm": [float(x) for x in result.trace.height_std],
         "layer_height_check": extraction.height_check,
+        "height_slab_scale": _scale_summary(extraction.height_scale),
         # critical values inside the range made slab boundaries, and the slab thickness
         # relative to the target spacing that this leaves (1 everywhere without them)
         "slab_anchors": [float(a) for a in extraction.spacing.anchors],
@@ -212,6 +213,18 @@ def _toolpath(
     return report
 
 
+def _scale_summary(scale: np.ndarray) -> dict[str, Any]:
+    """What matching H to the slab volumes did (``layers.match_slab_heights``)."""
+    from slicer.slabs import SCALE_LIMITS
+
+    if not len(scale):
+        return {}
+    off = np.flatnonzero(np.abs(scale - 1.0) > 0.01)
+    return {"min": float(scale.min()), "max": float(scale.max()),
+            "layers_beyond_1pct": [[int(k), round(float(scale[k]), 4)] for k in off[:20]],
+            "at_limit": int(np.sum((scale <= SCALE_LIMITS[0]) | (scale >= SCALE_LIMITS[1])))}
+
+
 def _thickness_ratio(spacing: LayerSpacing) -> list[float]:
     """[min, max] slab thickness / requested spacing delta."""
     thickness = np.diff(spacing.bounds)
@@ -228,7 +241,7 @@ def _slab_check(tetmesh: TetMesh, field: Field, report: dict[str, Any]) -> dict[
     the sum of those differences.
     Adds ``slab_mm3`` to each per-layer entry."""
     from slicer.layers import slab_bounds
-    from slicer.toolpath.volume import slab_volumes
+    from slicer.slabs import slab_volumes
 
     iso = np.asarray(field.iso, dtype=np.float64)
     if len(iso) == 0:

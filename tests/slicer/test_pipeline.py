@@ -73,3 +73,7 @@ def test_slab_volumes_are_reported_per_layer(sliced: dict[bool, Path]) -> None:
     per_layer = [entry["slab_mm3"] for entry in report["per_layer"]]
     assert np.allclose(per_layer, 256.0, rtol=1e-6)
     assert slab["layer_rel_error_p90"] < 0.01
+    # planar layers of a box: first-order H is exact, nothing to match
+    scale = json.loads((sliced[True] / "report.json").read_text())["slicing"]["height_slab_scale"]
+    assert [scale["min"], scale["max"]] == pytest.approx([1.0, 1.0], abs=1e-6)
+    assert scale["layers_beyond_1pct"] == [] and scale["at_limit"] == 0

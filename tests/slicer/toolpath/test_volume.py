@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slicer.toolpath.volume import match_volume, required_volume, segment_volume, slab_volumes
+from slicer.toolpath.volume import match_volume, required_volume, segment_volume
 
 
 def _square(n: int = 6) -> tuple[np.ndarray, np.ndarray]:
@@ -93,45 +93,3 @@ def test_match_volume_scans_a_bracket_it_cannot_close() -> None:
     assert abs(res.rel_error) < 0.005
     assert 1.005 <= res.tau <= 1.04
     assert len(res.trace) > 2
-
-
-def _cube_tets() -> tuple[np.ndarray, np.ndarray]:
-    """The unit cube as 6 positively oriented tets around the diagonal (0,0,0)-(1,1,1)."""
-    v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], dtype=float)
-    idx = {tuple(p): i for i, p in enumerate(v.astype(int))}
-    tets = []
-    for perm in ((0, 1, 2), (0, 2, 1), (1, 0, 2), (1, 2, 0), (2, 0, 1), (2, 1, 0)):
-        p = np.zeros(3, dtype=int)
-        chain = [idx[tuple(p)]]
-        for axis in perm:
-            p[axis] = 1
-            chain.append(idx[tuple(p)])
-        tets.append(chain)
-    return v, np.array(tets)
-
-
-def test_slab_volumes_of_a_linear_field_on_a_cube() -> None:
-    v, t = _cube_tets()
-    # g = z: slabs of a unit square, thickness = bound spacing; a tie-heavy case (g takes
-    # only two values per tet edge direction)
-    b = np.array([-1.0, 0.1, 0.35, 0.5, 0.9, 2.0])
-    assert np.allclose(slab_volumes(v, t, v[:, 2], b), [0.1, 0.25, 0.15, 0.4, 0.1], atol=1e-7)
-    # g = x + y + z: volume below s is s^3 / 6 for s <= 1 (a corner tet), 1/2 at s = 3/2
-    g = v.sum(axis=1)
-    below = slab_volumes(v, t, g, np.array([0.0, 0.6, 1.0, 1.5, 3.0]))
-    assert np.allclose(np.cumsum(below), [0.6**3 / 6, 1 / 6, 0.5, 1.0], atol=1e-7)
-
-
-def test_slab_volumes_match_sampling_on_a_random_tet() -> None:
-    rng = np.random.default_rng(3)
-    v = rng.normal(size=(4, 3))
-    t = np.array([[0, 1, 2, 3]])
-    g = rng.normal(size=4)
-    b = np.linspace(g.min() - 0.1, g.max() + 0.1, 7)
-    vol = abs(np.linalg.det(v[1:] - v[0])) / 6.0
-    exact = slab_volumes(v, t, g, b)
-    # points uniform in the tet: barycentric weights ~ Dirichlet(1, 1, 1, 1); g is linear
-    w = rng.dirichlet(np.ones(4), 400_000)
-    sampled = np.histogram(w @ g, bins=b)[0] / len(w) * vol
-    assert exact.sum() == pytest.approx(vol, rel=1e-9)
-    assert np.allclose(exact, sampled, atol=0.01 * vol)
