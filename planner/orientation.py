@@ -286,6 +286,7 @@ def _viterbi(cost: np.ndarray, grid: np.ndarray, weight: float) -> np.ndarray:
     return path
 
 
+AXIS_CHECK_DEG = 2.0  # a sample whose axis is this far from its strided sample's is checked too
 REPAIR_ROUNDS = 4  # repair, ramp, re-check: a ramp may break a neighbour, so repeat
 REPAIR_BATCH = 2048  # poses per check while repairing (failing samples x candidates)
 
@@ -392,6 +393,16 @@ def choose(
             if len(near) and stride > 1:
                 extra = np.unique(np.clip(near[:, None] + np.arange(-stride, stride + 1), 0,
                                           len(rows) - 1))
+            else:
+                extra = np.zeros(0, dtype=np.int64)
+            if stride > 1:
+                # and where the nozzle turns away from the strided samples' axes: a sample
+                # whose axis spikes (a layer curling at its edge) can reach the wall while
+                # the samples on either side clear it by centimetres
+                base = (np.arange(len(rows)) // stride) * stride
+                turned = np.einsum("ij,ij->i", ax, ax[base]) < np.cos(np.radians(AXIS_CHECK_DEG))
+                extra = np.union1d(extra, np.flatnonzero(turned))
+            if len(extra):
                 extra = extra[has[extra] & ~pick[extra]]
                 if len(extra):
                     c2 = reach.collision.clearance(q[extra])

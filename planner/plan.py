@@ -245,11 +245,19 @@ def smooth_normals(toolpath: Toolpath, k: int, max_deg: float) -> tuple[Toolpath
     S = np.concatenate([np.zeros((1, 3)), np.cumsum(n, axis=0)])
     m = unit((S[hi + 1] - S[lo]) / (hi - lo + 1)[:, None])
     out = turn_towards(n, m, np.radians(max_deg))  # towards the mean, at most the cap
-    # only where the normal turns fast (faster than TURN_DEG_PER_MM over the window)
+    # only where the normal turns fast (faster than TURN_DEG_PER_MM over the window, or over
+    # one step: a spike at one waypoint, e.g. where a layer curls at its edge, turns away
+    # and back, so the window's ends agree)
     P = toolpath.position
+    rate = np.radians(TURN_DEG_PER_MM)
     span = np.linalg.norm(P[hi] - P[lo], axis=1)
     turn = np.arccos(np.clip(np.einsum("ij,ij->i", n[hi], n[lo]), -1.0, 1.0))
-    fast = turn > np.radians(TURN_DEG_PER_MM) * np.maximum(span, 1e-9)
+    fast = turn > rate * np.maximum(span, 1e-9)
+    step_turn = np.arccos(np.clip(np.einsum("ij,ij->i", n[1:], n[:-1]), -1.0, 1.0))
+    step_len = np.linalg.norm(P[1:] - P[:-1], axis=1)
+    sharp = (step_turn > rate * np.maximum(step_len, 1e-9)) & ~new[1:]
+    fast[1:] |= sharp
+    fast[:-1] |= sharp
     fast = ndimage.binary_dilation(fast, structure=np.ones(2 * k + 1, dtype=bool))
     out = np.where(fast[:, None], out, n)
     dev = np.where(fast, np.arccos(np.clip(np.einsum("ij,ij->i", out, n), -1.0, 1.0)), 0.0)

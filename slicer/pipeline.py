@@ -238,7 +238,9 @@ def _slab_check(tetmesh: TetMesh, field: Field, report: dict[str, Any]) -> dict[
     against the exact volume of its slab of the solid (``slab_bounds``). They differ where
     the cross-section changes fast within a slab (a part ending or starting mid-slab): there
     the ink of the layer lands next to the solid, and the whole-model volume error carries
-    the sum of those differences.
+    the sum of those differences. The layers stage now scales each layer's H to its slab
+    (``layers.match_slab_heights``; the slicing report's ``height_slab_scale`` says by how
+    much), so the two agree unless that factor hit its limit: a check, not a correction.
     Adds ``slab_mm3`` to each per-layer entry."""
     from slicer.layers import slab_bounds
     from slicer.slabs import slab_volumes

@@ -182,3 +182,24 @@ def test_batched_repair_picks_the_same_candidates_as_one_at_a_time(
     assert np.all(batched.status == OK)
     for name in ("q", "psi", "tilt", "lean", "status"):
         assert np.array_equal(getattr(batched, name), getattr(single, name)), name
+
+
+def test_a_sample_whose_axis_spikes_is_checked_for_clearance(cell: CellConfig) -> None:
+    """Clearance is computed on every few samples and densely near the requirement; a single
+    waypoint whose normal leans 20 deg further towards the wall than its neighbours' (a layer
+    curling at its edge) must be checked too, or the nozzle may reach the wall unseen."""
+    wall_cell, tp = _wall_case(cell)
+    normal = np.array(tp.normal)
+    spike = np.radians(45.0)
+    spikes = [13, 22, 31]  # apart, so some fall between the strided samples
+    normal[spikes] = [np.sin(spike), 0.0, np.cos(spike)]
+    spiky = make_toolpath(np.array(tp.position), normal, np.zeros(len(tp), np.int32))
+    result = plan(spiky, wall_cell, placement=_fixed_placement(wall_cell, spiky))
+    wp = result.samples.waypoint
+    at_spikes = np.flatnonzero(np.isin(wp, spikes))
+    assert len(at_spikes) == len(spikes)
+    assert np.all(np.isfinite(result.orientation.clearance[at_spikes]))
+    # the neighbours of a spike, where the axis swings in and out, are checked as well
+    ax = result.orientation.axis
+    turned = np.einsum("ij,ij->i", ax[1:], ax[:-1]) < np.cos(np.radians(2.0))
+    assert np.all(np.isfinite(result.orientation.clearance[1:][turned]))

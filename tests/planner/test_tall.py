@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from planner.cell import CellConfig
 from planner.orientation import alpha_of, nozzle_axis
@@ -118,3 +119,10 @@ def test_smoothing_moves_sharp_normal_turns_only_and_within_the_cap() -> None:
     dome = synthetic.dome(radius=30.0, cap=6.0, rings=3, step=1.0)
     _, dev = smooth_normals(dome, 2, 8.0)
     assert not dev.any()
+    # a spike at one waypoint turns away and back: the window's ends agree, the steps do not
+    n = np.tile([0.0, 0.0, 1.0], (len(tp), 1))
+    n[20] = [np.sin(a), 0.0, np.cos(a)]
+    spiked = make_toolpath(np.array(tp.position), n, np.array(tp.path))
+    out, dev = smooth_normals(spiked, 2, 8.0)
+    assert np.degrees(dev[20]) == pytest.approx(8.0)  # towards its neighbours, by the cap
+    assert np.flatnonzero(dev > 1e-9).max() <= 20 + 2 and np.flatnonzero(dev > 1e-9).min() >= 18
