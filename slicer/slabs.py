@@ -24,7 +24,7 @@ def height_integral(vertices: NDArray[np.float64], faces: NDArray[np.integer],
                     face_layer: NDArray[np.integer], height: NDArray[np.float64],
                     n_layers: int) -> NDArray[np.float64]:
     """(L,) float64, mm^3, the integral of H over each layer: sum of area x mean corner H
-    (the toolpath's required volume, ``toolpath.volume.required_volume``)."""
+    (also the toolpath's required volume of a component, ``toolpath.volume.required_volume``)."""
     tri = vertices[faces]
     area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
     out: NDArray[np.float64] = np.bincount(face_layer, weights=area * height[faces].mean(axis=1),

@@ -24,6 +24,8 @@ from typing import Generic, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
+from slicer.slabs import height_integral
+
 T = TypeVar("T")
 
 TAU_LIMITS = (0.5, 2.0)  # spacing factors outside this are not volume matching, they are bugs
@@ -42,9 +44,8 @@ def required_volume(
         faces: (m, 3) int32.
         height: (n,) float64, mm, layer height per vertex.
     """
-    tri = vertices[faces]
-    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    return float(np.sum(area * height[faces].mean(axis=1)))
+    one_layer = np.zeros(len(faces), dtype=np.int64)
+    return float(height_integral(vertices, faces, one_layer, height, 1)[0])
 
 
 def segment_volume(
