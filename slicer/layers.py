@@ -354,6 +354,7 @@ class LayerExtraction:
             p90_rel_error.
         height_scale: (L,) float64, the factor ``match_slab_heights`` applied to each
             layer's H (1 where it already matched its slab).
+        slab_mm3: (len(iso),) float64, mm^3, the exact volume of each layer's slab.
     """
 
     field: Field
@@ -362,21 +363,26 @@ class LayerExtraction:
     critical_report: list[dict[str, object]]
     height_check: dict[str, float]
     height_scale: np.ndarray
+    slab_mm3: np.ndarray
 
 
 def match_slab_heights(layers: Layers, ops: TetOperators, field: Field
-                       ) -> tuple[Layers, np.ndarray]:
+                       ) -> tuple[Layers, np.ndarray, np.ndarray]:
     """``layers`` with H scaled per layer so that its integral over the layer is the exact
-    volume of the layer's slab of the solid, and the (L,) factors (``slicer.slabs``)."""
+    volume of the layer's slab of the solid, the (L,) factors, and the exact slab volumes
+    (len(iso),) mm^3 (``slicer.slabs``)."""
     n = layers.layer_count
-    if n == 0 or len(layers.faces) == 0:
-        return layers, np.ones(n)
     g = np.asarray(field.g, dtype=np.float64)
-    bounds = slab_bounds(np.asarray(field.iso, dtype=np.float64), float(g.min()), float(g.max()))
-    slab = slab_volumes(ops.vertices, ops.tets, g, bounds)[:n]
+    iso = np.asarray(field.iso, dtype=np.float64)
+    if len(iso) == 0:
+        return layers, np.ones(n), np.zeros(0)
+    bounds = slab_bounds(iso, float(g.min()), float(g.max()))
+    slab = slab_volumes(ops.vertices, ops.tets, g, bounds)
+    if n == 0 or len(layers.faces) == 0:
+        return layers, np.ones(n), slab
     integral = height_integral(layers.vertices, layers.faces, layers.face_layer,
                                layers.vertex_height, n)
-    scale = slab_height_scale(integral, slab)
+    scale = slab_height_scale(integral, slab[:n])
     vertex_layer = np.zeros(len(layers.vertices), dtype=np.int64)
     vertex_layer[layers.faces.ravel()] = np.repeat(layers.face_layer, 3)
     return Layers(
@@ -385,7 +391,7 @@ def match_slab_heights(layers: Layers, ops: TetOperators, field: Field
         face_layer=layers.face_layer,
         vertex_height=layers.vertex_height * scale[vertex_layer],
         vertex_direction=layers.vertex_direction,
-    ), scale
+    ), scale, slab
 
 
 def check_heights(layers: Layers, pairs: int = GAP_CHECK_PAIRS) -> dict[str, float]:
@@ -477,8 +483,10 @@ def extract_layers(
         spacing = LayerSpacing(np.asarray(field.iso), float("nan"), used, float("nan"),
                                bounds, np.zeros(0))
         regions = []
-    layers, scale = match_slab_heights(iso_surfaces(ops, field, progress=prog), ops, field)
+    layers, scale, slab = match_slab_heights(iso_surfaces(ops, field, progress=prog), ops,
+                                             field)
     check = check_heights(layers)
     prog.end("layers", time.perf_counter() - start)
     return LayerExtraction(field=field, layers=layers, spacing=spacing,
-                           critical_report=regions, height_check=check, height_scale=scale)
+                           critical_report=regions, height_check=check, height_scale=scale,
+                           slab_mm3=slab)

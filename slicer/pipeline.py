@@ -21,10 +21,10 @@ from slicer.errors import InputError
 from slicer.mesh_io import Surface
 from slicer.progress import Progress, StageTimer
 from slicer.report import update_report
-from slicer.stages import Field, Layers, TetMesh
+from slicer.stages import TetMesh
 
 if TYPE_CHECKING:
-    from slicer.layers import LayerSpacing
+    from slicer.layers import LayerExtraction, LayerSpacing
 
 Until = Literal["tetmesh", "layers", "toolpath"]
 
@@ -78,13 +78,13 @@ def slice_model(
         return _finish(out_dir, report, timer, t0)
 
     with timer.stage("slicing"):
-        slicing_report, field, layers = _slice(tetmesh, job, out_dir, progress)
+        slicing_report, extraction = _slice(tetmesh, job, out_dir, progress)
     report["slicing"] = slicing_report
     if until == "layers":
         return _finish(out_dir, report, timer, t0)
 
     with timer.stage("toolpath"):
-        report["toolpath"] = _toolpath(tetmesh, field, layers, job, out_dir, surface.volume_mm3,
+        report["toolpath"] = _toolpath(tetmesh, extraction, job, out_dir, surface.volume_mm3,
                                        progress)
     return _finish(out_dir, report, timer, t0)
 
@@ -123,7 +123,7 @@ def _prepare_out_dir(out_dir: Path) -> None:
 
 def _slice(
     tetmesh: TetMesh, job: JobConfig, out_dir: Path, progress: Progress | None
-) -> tuple[dict[str, Any], Field, Layers]:
+) -> tuple[dict[str, Any], LayerExtraction]:
     """Field optimisation and layer extraction, their files, pictures and report section."""
     from slicer import field as field_mod
     from slicer import figures
@@ -180,11 +180,11 @@ def _slice(
         "notes": list(result.notes),
         "timing_s": dict(result.timings),
     }
-    return report, extraction.field, extraction.layers
+    return report, extraction
 
 
 def _toolpath(
-    tetmesh: TetMesh, field: Field, layers: Layers, job: JobConfig, out_dir: Path,
+    tetmesh: TetMesh, extraction: LayerExtraction, job: JobConfig, out_dir: Path,
     model_volume: float, progress: Progress | None,
 ) -> dict[str, Any]:
     """Toolpath generation, its files, pictures and report section."""
@@ -194,6 +194,7 @@ def _toolpath(
     from slicer.toolpath.figures import write_toolpath_figures
 
     profile = load_profile(job.extrusion.profile)
+    layers = extraction.layers
     result = compute_toolpath(layers, job, profile, progress=progress)
     report = dict(result.report)
     toolpath = result.toolpath
@@ -209,7 +210,7 @@ def _toolpath(
     write_toolpath_figures(result, layers, out_dir / "figures")
     deposited = float(report["deposited_volume_mm3"])
     report["volume_error"] = deposited / model_volume - 1.0 if model_volume > 0 else float("nan")
-    report["slab_volume"] = _slab_check(tetmesh, field, report)
+    report["slab_volume"] = _slab_check(extraction.slab_mm3, report)
     return report
 
 
@@ -233,28 +234,23 @@ def _thickness_ratio(spacing: LayerSpacing) -> list[float]:
     return [float(thickness.min() / spacing.delta), float(thickness.max() / spacing.delta)]
 
 
-def _slab_check(tetmesh: TetMesh, field: Field, report: dict[str, Any]) -> dict[str, Any]:
+def _slab_check(slab: np.ndarray, report: dict[str, Any]) -> dict[str, Any]:
     """Each layer's required volume (the integral of H over it, what the toolpath deposits)
-    against the exact volume of its slab of the solid (``slab_bounds``). They differ where
-    the cross-section changes fast within a slab (a part ending or starting mid-slab): there
-    the ink of the layer lands next to the solid, and the whole-model volume error carries
-    the sum of those differences. The layers stage now scales each layer's H to its slab
-    (``layers.match_slab_heights``; the slicing report's ``height_slab_scale`` says by how
-    much), so the two agree unless that factor hit its limit: a check, not a correction.
+    against the exact volume of its slab of the solid (``slab``, (len(iso),) mm^3, from the
+    layers stage). They differ where the cross-section changes fast within a slab (a part
+    ending or starting mid-slab): there the ink of the layer lands next to the solid, and the
+    whole-model volume error carries the sum of those differences. The layers stage scales
+    each layer's H to its slab (``layers.match_slab_heights``; the slicing report's
+    ``height_slab_scale`` says by how much), so the two agree unless that factor hit its
+    limit: a check, not a correction.
     Adds ``slab_mm3`` to each per-layer entry."""
-    from slicer.layers import slab_bounds
-    from slicer.slabs import slab_volumes
-
-    iso = np.asarray(field.iso, dtype=np.float64)
-    if len(iso) == 0:
+    if len(slab) == 0:
         return {}
-    bounds = slab_bounds(iso, float(field.g.min()), float(field.g.max()))
-    slab = slab_volumes(tetmesh.vertices, tetmesh.tets, field.g, bounds)
     layers = report.get("per_layer", [])
-    required = np.zeros(len(iso))
+    required = np.zeros(len(slab))
     for entry in layers:
         k = int(entry["layer"])
-        if 0 <= k < len(iso):
+        if 0 <= k < len(slab):
             required[k] = float(entry["required_mm3"])
             entry["slab_mm3"] = float(slab[k])
     rel = np.abs(required - slab) / np.maximum(slab, 1e-9)
