@@ -12,6 +12,7 @@ from slicer.toolpath.flush import (
     boundary_surface,
     filament_height,
     flush_toolpath,
+    limit_slope,
     signed_distance,
 )
 
@@ -155,3 +156,54 @@ def test_sloped_top_face_converges_to_flush() -> None:
     assert np.abs(d).max() < 2e-3
     assert rep.moved_down == 7 and rep.capped == 0
     assert rep.mean_mm == pytest.approx((0.5 * c - 0.3) / c, abs=2e-3)
+
+
+def test_slope_limit_cuts_a_lone_move_back_to_its_neighbours() -> None:
+    x = np.arange(10) * 0.4
+    pts = np.column_stack([x, np.zeros(10), np.zeros(10)])
+    up = np.tile([0.0, 0.0, 1.0], (10, 1))
+    one = np.zeros(10, dtype=np.int64)
+    tan14 = np.tan(np.radians(14.0))
+    move = np.zeros(10)
+    move[4] = -0.33  # one waypoint dives 0.33 mm where its neighbours, 0.4 mm away, stay
+    out = limit_slope(move, pts, up, one, 14.0)
+    assert out[4] == pytest.approx(-0.4 * tan14)
+    assert np.allclose(np.delete(out, 4), 0.0)
+    # a ramp within the angle is kept as it is
+    ramp = np.linspace(0.0, 0.3, 10)  # 0.083 per mm: 4.8 deg
+    assert np.allclose(limit_slope(ramp, pts, up, one, 14.0), ramp)
+    far = np.r_[0.3, 0.3, 0.3, 0.0, 0.0, 0.0, 0.0, -0.3, -0.3, -0.3]
+    kept = limit_slope(far, pts, up, one, 14.0)
+    assert np.all(np.abs(np.diff(kept)) <= 0.4 * tan14 + 1e-12)
+    # the drop to 0 is too steep: the run is cut back to a ramp, never moved further
+    assert kept[:3] == pytest.approx([3 * 0.4 * tan14, 2 * 0.4 * tan14, 0.4 * tan14])
+    assert np.all(np.abs(kept) <= np.abs(far) + 1e-12) and np.all(kept * far >= 0.0)
+    # paths are independent: a path's last waypoint does not limit the next path's first
+    path = np.r_[np.zeros(5), np.ones(5)].astype(np.int64)
+    step = np.r_[np.zeros(5), np.full(5, 0.3)]
+    assert np.allclose(limit_slope(step, pts, up, path, 14.0), step)
+    # a step that already climbs 10 deg out of the plane leaves 4 deg for the moves
+    climbing = pts + np.column_stack([np.zeros(10), np.zeros(10), x * np.tan(np.radians(10.0))])
+    out = limit_slope(move, climbing, up, one, 14.0)
+    length, climb = 0.4 / np.cos(np.radians(10.0)), 0.4 * np.tan(np.radians(10.0))
+    assert out[4] == pytest.approx(-(length * tan14 - climb))
+
+
+def test_a_lone_exposed_waypoint_does_not_dive_out_of_its_path() -> None:
+    # one line under the top face of a 6 mm box (H 0.5, h_f 1.0, waypoints 0.5 mm apart):
+    # its filaments end flush with the top, except at one waypoint that sits 0.25 mm higher
+    h, h_f = 0.5, 1.0
+    mesh = _box_tets((6.0, 6.0, 6.0))
+    x = np.linspace(1.0, 5.0, 9)
+    z = np.full_like(x, 5.5)
+    z[4] = 5.75
+    tp = _toolpath(np.column_stack([x, np.full_like(x, 3.0), z]), np.zeros(9, dtype=np.int64),
+                   _speed_for_height(h_f), h, np.array([0.0, 0.0, 1.0]))
+    out, rep = flush_toolpath(tp, mesh, RoundFilament())
+    dz = out.position[:, 2] - tp.position[:, 2]
+    # alone it would move the full 0.25 mm; its steps (0.56 mm, climbing 0.25 mm) already
+    # leave the horizontal by 26.6 deg, more than 14: it may not move at all
+    allowed = 0.0
+    assert dz[4] == pytest.approx(-allowed, abs=1e-6)
+    assert np.allclose(np.delete(dz, 4), 0.0)
+    assert rep.residual_mm == pytest.approx(0.25 - allowed, abs=1e-6)  # still sticking out
