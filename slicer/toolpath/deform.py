@@ -11,10 +11,11 @@ the face areas and is factored once (sparse Cholesky). One vertex per component 
 How many iterations: the solve stops once the achieved scale is within ``scale_tol`` of the
 target on 90 % of the area (what the toolpath's width error sees), or when the energy stops
 falling. A fixed handful is not enough where W varies a lot: on the membrane's dome layers
-(W 1.0-6.9 mm within one layer) 6 iterations left the achieved scale 25-200 % off the target
-on a quarter of the faces and the stripe width error p50 at 33 %; iterating to convergence
-(130-170 iterations, 2-3 s per layer) brings it to 14 %. Where W is nearly constant (the
-socket: 1.4 % off before any iteration) one or two iterations reach the tolerance.
+(sliced at 0.70 mm: W 1.0-6.9 mm within one layer) 6 iterations left the achieved scale
+25-200 % off the target on a quarter of the faces and the stripe width error p50 at 33 %;
+iterating to convergence (130-170 iterations, 2-3 s per layer) brings it to 14 %. Where W is
+nearly constant (the socket: 1.4 % off before any iteration) one or two iterations reach the
+tolerance.
 """
 
 from __future__ import annotations
