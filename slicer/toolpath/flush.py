@@ -127,22 +127,20 @@ def filament_height(toolpath: Toolpath, model: FilamentModel) -> NDArray[np.floa
     return np.where(v > 0, h * scale, 0.0)
 
 
-def _envelope(f: NDArray[np.float64], x: NDArray[np.float64], group: NDArray[np.int64],
-              slope: float) -> NDArray[np.float64]:
-    """min_j (f_j + slope |x_i - x_j|) over j in i's group, for x increasing in each group
-    (a one-dimensional distance transform: two cumulative minima, no loop)."""
-    if len(f) == 0:
-        return f
+def _envelope(f: NDArray[np.float64], x: NDArray[np.float64], group: NDArray[np.int64]
+              ) -> NDArray[np.float64]:
+    """min_j (f_j + |x_i - x_j|) over j in i's group, for x increasing in each group (a
+    one-dimensional distance transform: two cumulative minima, no loop)."""
     # groups are contiguous; an offset falling with the group keeps a minimum from carrying
     # over into the next group
-    big = 2.0 * (float(np.abs(f).max()) + slope * float(np.abs(x).max())) + 1.0
+    big = 2.0 * (float(np.abs(f).max()) + float(np.abs(x).max())) + 1.0
     off = big * (group.max() - group).astype(np.float64)
-    fwd = np.minimum.accumulate(f - slope * x + off) - off + slope * x
-    rev = (np.minimum.accumulate((f + slope * x - off)[::-1]) + off[::-1])[::-1] - slope * x
+    fwd = np.minimum.accumulate(f - x + off) - off + x
+    rev = (np.minimum.accumulate((f + x - off)[::-1]) + off[::-1])[::-1] - x
     return np.minimum(np.minimum(fwd, rev), f)
 
 
-def limit_slope(move: NDArray[np.float64], points: NDArray[np.float64],
+def limit_step_angle(move: NDArray[np.float64], points: NDArray[np.float64],
                 normals: NDArray[np.float64], path: NDArray[np.integer],
                 max_deg: float) -> NDArray[np.float64]:
     """Moves cut back so that no step of a path leaves the plane normal to the printing
@@ -173,11 +171,11 @@ def limit_slope(move: NDArray[np.float64], points: NDArray[np.float64],
     climb = np.abs(np.einsum("ij,ij->i", step, normals[:-1]))
     budget = np.r_[0.0, np.maximum(length * np.tan(np.radians(max_deg)) - climb, 0.0)]
     budget[new_group] = 0.0
-    # the envelope in "budget length": slope 1 in this coordinate is b_k per step
+    # in the coordinate x (the budgets summed along the path) the envelope has slope 1
     x = np.cumsum(budget)
     x -= x[np.flatnonzero(new_group)][group]
-    up = _envelope(np.maximum(move, 0.0), x, group, 1.0)
-    down = _envelope(np.maximum(-move, 0.0), x, group, 1.0)
+    up = _envelope(np.maximum(move, 0.0), x, group)
+    down = _envelope(np.maximum(-move, 0.0), x, group)
     return up - down
 
 
@@ -236,7 +234,7 @@ def flush_toolpath(toolpath: Toolpath, tetmesh: TetMesh, model: FilamentModel,
         active = active[still]
     both = (down > 0) & (up > 0)
     net = np.where(both, 0.5 * (up - down), up - down)
-    net = limit_slope(net, p, n, np.asarray(toolpath.path)[idx], MAX_STEP_DEG)
+    net = limit_step_angle(net, p, n, np.asarray(toolpath.path)[idx], MAX_STEP_DEG)
     net = np.where(np.abs(net) >= min_move_mm, net, 0.0)
     position = toolpath.position.copy()
     position[idx] = p + net[:, None] * n

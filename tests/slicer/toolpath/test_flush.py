@@ -12,7 +12,7 @@ from slicer.toolpath.flush import (
     boundary_surface,
     filament_height,
     flush_toolpath,
-    limit_slope,
+    limit_step_angle,
     signed_distance,
 )
 
@@ -158,7 +158,7 @@ def test_sloped_top_face_converges_to_flush() -> None:
     assert rep.mean_mm == pytest.approx((0.5 * c - 0.3) / c, abs=2e-3)
 
 
-def test_slope_limit_cuts_a_lone_move_back_to_its_neighbours() -> None:
+def test_step_angle_limit_cuts_a_lone_move_back_to_its_neighbours() -> None:
     x = np.arange(10) * 0.4
     pts = np.column_stack([x, np.zeros(10), np.zeros(10)])
     up = np.tile([0.0, 0.0, 1.0], (10, 1))
@@ -166,14 +166,14 @@ def test_slope_limit_cuts_a_lone_move_back_to_its_neighbours() -> None:
     tan14 = np.tan(np.radians(14.0))
     move = np.zeros(10)
     move[4] = -0.33  # one waypoint dives 0.33 mm where its neighbours, 0.4 mm away, stay
-    out = limit_slope(move, pts, up, one, 14.0)
+    out = limit_step_angle(move, pts, up, one, 14.0)
     assert out[4] == pytest.approx(-0.4 * tan14)
     assert np.allclose(np.delete(out, 4), 0.0)
     # a ramp within the angle is kept as it is
     ramp = np.linspace(0.0, 0.3, 10)  # 0.083 per mm: 4.8 deg
-    assert np.allclose(limit_slope(ramp, pts, up, one, 14.0), ramp)
+    assert np.allclose(limit_step_angle(ramp, pts, up, one, 14.0), ramp)
     far = np.r_[0.3, 0.3, 0.3, 0.0, 0.0, 0.0, 0.0, -0.3, -0.3, -0.3]
-    kept = limit_slope(far, pts, up, one, 14.0)
+    kept = limit_step_angle(far, pts, up, one, 14.0)
     assert np.all(np.abs(np.diff(kept)) <= 0.4 * tan14 + 1e-12)
     # the drop to 0 is too steep: the run is cut back to a ramp, never moved further
     assert kept[:3] == pytest.approx([3 * 0.4 * tan14, 2 * 0.4 * tan14, 0.4 * tan14])
@@ -181,10 +181,10 @@ def test_slope_limit_cuts_a_lone_move_back_to_its_neighbours() -> None:
     # paths are independent: a path's last waypoint does not limit the next path's first
     path = np.r_[np.zeros(5), np.ones(5)].astype(np.int64)
     step = np.r_[np.zeros(5), np.full(5, 0.3)]
-    assert np.allclose(limit_slope(step, pts, up, path, 14.0), step)
+    assert np.allclose(limit_step_angle(step, pts, up, path, 14.0), step)
     # a step that already climbs 10 deg out of the plane leaves 4 deg for the moves
     climbing = pts + np.column_stack([np.zeros(10), np.zeros(10), x * np.tan(np.radians(10.0))])
-    out = limit_slope(move, climbing, up, one, 14.0)
+    out = limit_step_angle(move, climbing, up, one, 14.0)
     length, climb = 0.4 / np.cos(np.radians(10.0)), 0.4 * np.tan(np.radians(10.0))
     assert out[4] == pytest.approx(-(length * tan14 - climb))
 
