@@ -102,13 +102,12 @@ def main() -> None:
 
         variants = [("cavity as surface", matched, job, None),
                     ("cavity filled", matched, job, filled)]
-    cache: dict[int, tuple[Toolpath, dict[str, Any]]] = {}
+    built: tuple[Layers, JobConfig, Toolpath, dict[str, Any]] | None = None
     for name, layers, cfg, fill in variants:
         t0 = time.perf_counter()
-        key = id(layers) * 31 + id(cfg)
-        if key not in cache:
-            cache[key] = _toolpath(layers, cfg, tet)
-        toolpath, report = cache[key]
+        if built is None or built[0] is not layers or built[1] is not cfg:
+            built = (layers, cfg, *_toolpath(layers, cfg, tet))  # the cavity pair shares one
+        toolpath, report = built[2], built[3]
         t1 = time.perf_counter()
         printed = _print(toolpath, mesh, cfg, args.voxel, fill)
         t2 = time.perf_counter()

@@ -205,7 +205,8 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
     hist_f: list[NDArray[np.float64]] = []
     g_prev: NDArray[np.float64] | None = None
     f_prev: NDArray[np.float64] | None = None
-    deviation, _ = scale_deviation(x, f, area, scale)
+    # without a tolerance the deviation is only reported, not checked every iteration
+    deviation = scale_deviation(x, f, area, scale)[0] if scale_tol > 0 else np.inf
     for _ in range(iterations):
         if energy <= floor:
             status = "converged"
@@ -235,7 +236,8 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
         previous = energy
         x, target, energy = cand, cand_target, cand_energy
         trace.append(energy)
-        deviation, _ = scale_deviation(x, f, area, scale)
+        if scale_tol > 0:
+            deviation = scale_deviation(x, f, area, scale)[0]
         if deviation <= scale_tol:
             status = "within_tolerance"
             break
