@@ -8,12 +8,17 @@ the metrics run as ``mesp slice`` and ``mesp inspect`` would. The variants:
   6 iterations (before session 10).
 * ``slab-heights``: layer heights matched to the exact slab volumes (``slicer.slabs``, the
   default) against the first-order H = slab thickness / |grad g|.
+* ``pitch-width``: contours fitted to a band printed as wide as its local pitch (the default,
+  session 11) against the profile's W(H) whatever the pitch.
 * ``cavity``: one print measured with designed cavities as surface (the default) and with them
   filled like pores (``scipy.ndimage.binary_fill_holes``, before session 10).
 
 Prints per variant the width error, the volume error, the print metrics and the time.
 
     .venv/bin/python bench/bench_print_ablation.py DIR --compare deformation [--voxel 0.25]
+
+(``pitch-width`` also prints the width error against W(H), the ``width_error_nominal`` of the
+report, since the default's is against the width printed.)
 """
 
 from __future__ import annotations
@@ -69,14 +74,16 @@ def _print(toolpath: Toolpath, mesh: trimesh.Trimesh, job: JobConfig, voxel: flo
 def _summary(report: dict[str, Any], model_mm3: float) -> str:
     width = ", ".join(f"{k} p50/p90 {100 * v['p50']:.1f}/{100 * v['p90']:.1f} %"
                       for k, v in report["width_error"].items())
+    nominal = ", ".join(f"{k} p90 {100 * v['p90']:.1f} %"
+                        for k, v in report.get("width_error_nominal", {}).items())
     volume = float(report["deposited_volume_mm3"]) / model_mm3 - 1.0
-    return f"width {width}; volume {100 * volume:+.2f} %"
+    return f"width {width} (against W(H): {nominal}); volume {100 * volume:+.2f} %"
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("job", type=Path, help="a directory written by mesp slice")
-    ap.add_argument("--compare", choices=["deformation", "slab-heights", "cavity"],
+    ap.add_argument("--compare", choices=["deformation", "slab-heights", "pitch-width", "cavity"],
                     required=True)
     ap.add_argument("--voxel", type=float, default=0.25, help="deposition voxel, mm")
     args = ap.parse_args()
@@ -96,6 +103,9 @@ def main() -> None:
     elif args.compare == "slab-heights":
         first = iso_surfaces(build_operators(tet), field)
         variants = [("slab-matched H", matched, job, None), ("first-order H", first, job, None)]
+    elif args.compare == "pitch-width":
+        fixed = job.with_overrides(toolpath={"pitch_width": False})
+        variants = [("pitch width", matched, job, None), ("W(H)", matched, fixed, None)]
     else:
         def filled(mask: np.ndarray, seeds: np.ndarray | None = None) -> np.ndarray:
             return np.asarray(ndimage.binary_fill_holes(mask))

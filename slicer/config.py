@@ -164,6 +164,7 @@ class ToolpathConfig:
     min_path_length_mm: float = 1.0
     join_factor: float = 3.0
     fit_bands: bool = True
+    pitch_width: bool = True
     flush: bool = True
     stripe_perimeter: bool = False
     first_layer_beta: float = 0.0

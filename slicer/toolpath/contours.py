@@ -60,6 +60,21 @@ def band_count(band: NDArray[np.float64], spacing: float) -> NDArray[np.int64]:
     return np.maximum(np.rint(np.asarray(band, dtype=np.float64) / spacing), 1).astype(np.int64)
 
 
+def band_pitch(d_outer: NDArray[np.float64], d_inner: NDArray[np.float64], spacing: float,
+               smooth: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
+               ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(n,) float64 mm, the even pitch b / round(b / spacing) of a band whose local width is
+    b = d_outer + d_inner, and (n,) the band width it is compared with; both blended by
+    ``smooth`` when given (see ``two_sided_contour_lines``)."""
+    band = np.asarray(d_outer, dtype=np.float64) + np.asarray(d_inner, dtype=np.float64)
+    pitch = band / band_count(band, spacing)
+    if smooth is not None:
+        # the count compares like with like: both blended, so it is exactly n inside a
+        # region of n lines whatever the small-scale ripple of the distances
+        return np.maximum(smooth(pitch), tol.zero), smooth(band)
+    return np.maximum(pitch, tol.zero), band
+
+
 def two_sided_contour_lines(
     vertices: NDArray[np.float64], faces: NDArray[np.integer], d_outer: NDArray[np.float64],
     d_inner: NDArray[np.float64], spacing: float,
@@ -97,15 +112,7 @@ def two_sided_contour_lines(
     if not spacing > 0:
         raise InputError(f"contour spacing must be positive, got {spacing} mm",
                          "check the toolpath width")
-    band = da + db
-    pitch = band / band_count(band, spacing)
-    fit = band
-    if smooth is not None:
-        pitch = smooth(pitch)
-        # the count compares like with like: both blended, so it is exactly n inside a
-        # region of n lines whatever the small-scale ripple of the distances
-        fit = smooth(band)
-    pitch = np.maximum(pitch, tol.zero)
+    pitch, fit = band_pitch(da, db, spacing, smooth)
     # lines per face from the blended pitch, so a line appears where its room does
     n_face = np.maximum(np.floor((fit / pitch)[f].mean(axis=1) + 0.5 - room), 1
                         ).astype(np.int64)

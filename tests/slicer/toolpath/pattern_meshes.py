@@ -37,6 +37,17 @@ def disc(radius: float, h: float, inner: float = 0.0, jitter: float = 0.0, seed:
     return flat_mesh(p, tri)
 
 
+def eccentric_annulus(radius: float = 20.0, hole: float = 6.0, offset: float = 4.0,
+                      h: float = 0.6) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
+    """A flat disc (edge about h, jittered) with a hole of radius ``hole`` at x = offset:
+    a band radius - hole - offset wide at +x, radius - hole + offset at -x (mm)."""
+    v, f = disc(radius, h, jitter=0.2)
+    centre = v[f].mean(axis=1)[:, :2]
+    f = f[np.linalg.norm(centre - [offset, 0.0], axis=1) > hole]
+    used, inv = np.unique(f, return_inverse=True)
+    return v[used], inv.reshape(-1, 3).astype(np.int32)
+
+
 def flat_mesh(p: NDArray[np.float64], tri: NDArray[np.integer]
               ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
     """The triangles ``tri`` of the 2-D points ``p`` as a mesh in z = 0: unused points

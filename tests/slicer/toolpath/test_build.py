@@ -13,7 +13,12 @@ from slicer.config import JobConfig
 from slicer.extrusion import load_profile
 from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Layers
 from slicer.toolpath.build import ToolpathResult, compute_toolpath, layer_pattern
-from tests.slicer.toolpath.pattern_meshes import flat_mesh, plate_with_holes, sliver_disc
+from tests.slicer.toolpath.pattern_meshes import (
+    eccentric_annulus,
+    flat_mesh,
+    plate_with_holes,
+    sliver_disc,
+)
 
 PROFILE = load_profile("ecoflex-0030")
 
@@ -353,11 +358,12 @@ def test_narrow_band_on_a_stripe_layer_gets_contours() -> None:
     r = np.linalg.norm(tp.position[tp.extrude, :2], axis=1)
     assert np.all((r > 10.5) & (r < 17.2))
     assert np.ptp(r) > 0.6 * 4.55  # two loops across the band
-    # two lines hold 0.85 W each (15-20 % off the profile's W by construction); the flow per
-    # length, not the line count, makes up the volume, and the lines print about as wide as
-    # they lie apart
+    # two lines hold 0.85 W each (15-20 % off the profile's W by construction); they print
+    # as wide as the band's pitch (pitch_width), which makes up the volume without a flow fit
+    # of the whole component, and about as wide as they lie apart
     assert abs(res.report["layer_volume_error"]) < 0.01
-    assert res.report["per_layer"][0]["volume_status"][0].endswith("+flow")
+    assert res.report["per_layer"][0]["volume_status"][0] == "converged"
+    assert 0.75 * 4.55 < np.median(tp.width[tp.extrude]) < 0.9 * 4.55
     printed, nominal = (res.report[k]["contour"]["p50"]
                         for k in ("width_error", "width_error_nominal"))
     assert 0.1 < nominal < 0.25
@@ -425,6 +431,38 @@ def test_band_fitting_on_an_annulus_layer() -> None:
     assert fitted["width_error"]["contour"]["p90"] < 0.05
     assert fitted["width_error"]["contour"]["p90"] < 0.5 * eq9["width_error"]["contour"]["p90"]
     assert fitted["extrusion_starts"]["total"] == 1
+
+
+def test_contours_on_a_band_print_as_wide_as_its_pitch() -> None:
+    # a band 11 to 13 mm wide at W = 2.33 mm: 5 lines 2.2 mm apart at +x, 5 lines 2.4 mm
+    # apart across y = 0, 6 lines 2.17 mm apart at -x. Printed at W(H) they overlap or
+    # gap by up to 6 %; printed as wide as the pitch (the speed sets the width) they abut,
+    # and the ink follows the band's area
+    v, f = eccentric_annulus(hole=8.0, offset=1.0)
+    layers = Layers(v, f.astype(np.int64), np.zeros(len(f), np.int64), np.full(len(v), 0.6),
+                    np.tile([0.0, 0.0, 1.0], (len(v), 1)))
+    reports, paths = [], []
+    for pitch_width in (True, False):
+        job = JobConfig().with_overrides(toolpath={"pitch_width": pitch_width})
+        res = compute_toolpath(layers, job, PROFILE, measure_baselines=False, workers=1)
+        assert abs(res.report["layer_volume_error"]) < 0.02
+        reports.append(res.report)
+        paths.append(res.toolpath)
+    (fitted, fixed), (tp, tp_fixed) = reports, paths
+    assert fitted["width_error"]["contour"]["p90"] < 0.7 * fixed["width_error"]["contour"]["p90"]
+    # against W(H) the lines are where they were
+    assert fitted["width_error_nominal"]["contour"]["p90"] == pytest.approx(
+        fixed["width_error"]["contour"]["p90"], rel=0.2)
+    ext = tp.extrude
+    w, x = tp.width[ext], tp.position[ext, 0]
+    assert np.ptp(tp_fixed.width[tp_fixed.extrude]) < 1e-9
+    assert np.median(w[np.abs(x) < 3.0]) > 1.05 * np.median(w[x > 12.0])
+    assert np.median(w[np.abs(x) < 3.0]) > 1.05 * np.median(w[x < -12.0])
+    # eq. 4's W = C / (H v) still holds at every waypoint, speeds within the profile's table
+    c = tp.height[ext] * w * tp.speed[ext]
+    assert c == pytest.approx(PROFILE.rate_mm3_s, rel=1e-9)
+    lo, hi = PROFILE.speed_for_height(np.array(PROFILE.height_range[::-1]))
+    assert tp.speed[ext].min() >= lo - 1e-9 and tp.speed[ext].max() <= hi + 1e-9
 
 
 def test_eikonal_distance_keeps_contour_pitch_on_a_coarse_sliver_mesh() -> None:

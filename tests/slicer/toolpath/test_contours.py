@@ -7,7 +7,7 @@ import pytest
 
 from slicer.errors import InputError
 from slicer.toolpath import contours, geodesic, isolines
-from tests.slicer.toolpath.pattern_meshes import disc, dome
+from tests.slicer.toolpath.pattern_meshes import disc, dome, eccentric_annulus
 
 
 def _check_on_faces(v: np.ndarray, f: np.ndarray, lines: object) -> None:
@@ -109,19 +109,11 @@ def test_two_sided_contours_fit_a_whole_number_of_circles(w: float, radii: list[
     assert np.sort([r.mean() for r in rad]) == pytest.approx(radii, abs=0.05)
 
 
-def _eccentric_annulus() -> tuple[np.ndarray, np.ndarray]:
-    v, f = disc(20.0, 0.6, jitter=0.2)
-    centre = v[f].mean(axis=1)[:, :2]
-    f = f[np.linalg.norm(centre - [4.0, 0.0], axis=1) > 6.0]  # hole r 6 at x = 4
-    used, inv = np.unique(f, return_inverse=True)
-    return v[used], inv.reshape(-1, 3).astype(np.int32)
-
-
 def test_two_sided_contours_branch_where_the_band_widens() -> None:
     from slicer.toolpath.build import _Surface
     from slicer.toolpath.width_error import line_spacing
 
-    v, f = _eccentric_annulus()
+    v, f = eccentric_annulus()
     w = 2.45
     lines = contours.two_sided_contour_lines(v, f, *_sides(v, f), w,
                                              _Surface(v, f).smoother(2.0 * w))
@@ -144,6 +136,40 @@ def test_two_sided_contours_branch_where_the_band_widens() -> None:
     err9 = np.abs(line_spacing(eq9.points, eq9.line, closed=eq9.closed) - w) / w
     assert np.percentile(err, 90) < np.percentile(err9, 90)
     assert np.percentile(err, 95) < 0.5 * np.percentile(err9, 95)
+
+
+def test_band_pitch_is_the_band_over_a_whole_count() -> None:
+    # 10 mm at 2.3 mm: round(4.35) = 4 lines, 2.5 mm apart; 11.8 mm: 5 lines, 2.36 mm
+    pitch, band = contours.band_pitch(np.array([4.0, 5.0]), np.array([6.0, 6.8]), 2.3)
+    assert band == pytest.approx([10.0, 11.8])
+    assert pitch == pytest.approx([2.5, 2.36])
+
+
+@pytest.mark.parametrize("eccentric", [False, True])
+def test_band_pitch_predicts_the_spacing_of_the_fitted_lines(eccentric: bool) -> None:
+    # a 10 mm annulus at w = 2.3 mm: 4 circles 2.5 mm apart, 8.7 % off w everywhere and on
+    # the pitch; an eccentric band (10 to 18 mm) changes its count and the blended pitch
+    # follows the lines there too, never worse than w
+    from slicer.toolpath.build import PITCH_SMOOTHING, _Surface
+    from slicer.toolpath.mapback import interpolate
+    from slicer.toolpath.width_error import line_spacing
+
+    v, f = eccentric_annulus() if eccentric else disc(20.0, 0.6, inner=10.0, jitter=0.2)
+    w = 2.1 if eccentric else 2.3
+    smooth = _Surface(v, f).smoother(PITCH_SMOOTHING * w)
+    lines = contours.two_sided_contour_lines(v, f, *_sides(v, f), w, smooth)
+    pitch, _ = contours.band_pitch(*_sides(v, f), w, smooth)
+    spacing = line_spacing(lines.points, lines.line, closed=lines.closed)
+    at = interpolate(pitch, f, lines.face, lines.bary)
+    err_pitch = np.percentile(np.abs(spacing - at) / at, [50, 90])
+    err_w = np.percentile(np.abs(spacing - w) / w, [50, 90])
+    if eccentric:
+        assert err_pitch[1] < 0.06
+        assert np.all(err_pitch < 0.8 * err_w)
+    else:
+        assert at == pytest.approx(2.5, rel=0.01)
+        assert err_pitch[1] < 0.02
+        assert err_w[0] == pytest.approx(0.087, abs=0.01)
 
 
 def test_two_sided_contour_input_errors() -> None:
