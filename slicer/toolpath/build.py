@@ -388,6 +388,18 @@ class _Surface:
         pitch, _ = band_pitch(*sides, spacing, smooth)
         return np.asarray(np.clip(pitch / spacing, *CENTRE_WIDTH_SCALE), dtype=np.float64)
 
+    def centre_scale(self, spacing: float) -> NDArray[np.float64] | None:
+        """(n,) float64, the local band width d_outer + d_inner over ``spacing`` (within
+        CENTRE_WIDTH_SCALE): the one line along a thin band's middle (``centre_lines``)
+        printed as wide as the band where it runs, rather than one width for the whole
+        band (a band widening from 1 to 1.4 W along a tube's junction); None without a band.
+        """
+        sides = self.sides()
+        if sides is None:
+            return None
+        return np.asarray(np.clip((sides[0] + sides[1]) / spacing, *CENTRE_WIDTH_SCALE),
+                          dtype=np.float64)
+
     def line_gap(self, lines: SurfaceLines) -> NDArray[np.float64]:
         """(m,) float64, distance (surface units) from each face centre to the nearest
         line segment (inf without lines)."""
@@ -781,9 +793,13 @@ def _component_toolpath_unsafe(
 
     def centre_match(lines: SurfaceLines) -> VolumeMatch[_Built]:
         """One line along a band too narrow (or too wide) for W: its width is scaled to the
-        band by the nozzle speed (``fit_flow``)."""
+        band by the nozzle speed, point by point with ``pitch_width`` (``centre_scale``),
+        then as a whole to the volume (``fit_flow``)."""
+        scale = surf.centre_scale(comp.w_mean) if cfg.pitch_width else None
+
         def fixed_lines(t: float) -> tuple[float, _Built]:
-            built = fit_flow(comp.build(lines, None, comp.w_mean, start, lifter, lift))
+            built = fit_flow(comp.build(lines, None, comp.w_mean, start, lifter, lift,
+                                        scale=scale))
             return float(built.waypoints.deposited().sum()), built
 
         return match_volume(fixed_lines, required, cfg.volume_tolerance, 1.0, 1)

@@ -347,6 +347,32 @@ def test_thin_band_gets_a_centre_line() -> None:
     assert res.report["width_error_no_neighbour_fraction"]["contour"] == 1.0
 
 
+def test_centre_line_prints_as_wide_as_its_band() -> None:
+    """A band widening from 3 to 4.4 mm around a hole (W = 4.55 mm at H = 1 mm) holds one
+    line; with pitch_width it prints as wide as the band where it runs, without it one
+    width fits the whole band's volume."""
+    v, f = eccentric_annulus(radius=14.0, hole=10.3, offset=0.7, h=0.5)
+    widths, p90 = {}, {}
+    for on in (True, False):
+        job = JobConfig().with_overrides(toolpath={"first_pattern": "stripe",
+                                                   "pitch_width": on})
+        res = compute_toolpath(flat_layer(v, f, 1.0), job, PROFILE, measure_baselines=False,
+                               workers=1)
+        assert res.report["thin_fallback"]["centre-line"] == 1
+        assert abs(res.report["layer_volume_error"]) < 0.01
+        tp = res.toolpath
+        ext = tp.extrude
+        x = tp.position[ext, 0]
+        widths[on] = (np.median(tp.width[ext][x > 10.0]), np.median(tp.width[ext][x < -10.0]))
+        assert np.allclose(tp.width * tp.height * tp.speed, PROFILE.rate_mm3_s)
+        p90[on] = res.report["width_error"]["contour"]["p90"]
+    assert p90[True] < 0.06
+    assert p90[True] < 0.5 * p90[False]
+    assert widths[True][0] == pytest.approx(3.0, rel=0.05)
+    assert widths[True][1] == pytest.approx(4.4, rel=0.05)
+    assert widths[False][0] == pytest.approx(widths[False][1], rel=0.01)
+
+
 def test_narrow_band_on_a_stripe_layer_gets_contours() -> None:
     """An annulus 1.7 W wide (W = 4.55 mm at H = 1 mm): stripes across it would be stubs
     shorter than W, so the stripe layer prints it like a contour layer: two fitted loops
