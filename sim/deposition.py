@@ -194,16 +194,23 @@ class Segments(NamedTuple):
 
 
 def extrusion_segments(toolpath: Toolpath, morphology: Morphology,
-                       center_offset: float = 0.0) -> Segments:
+                       center_offset: float = 0.0,
+                       segment_speed: NDArray[np.float64] | None = None) -> Segments:
     """The extruding segments of ``toolpath``: consecutive waypoints of one path, both extruding.
 
     ``center_offset`` (a fraction of h_f) moves the filament centre from the nozzle tip along
     the printing direction; ``start`` and ``end`` are the filament centre line.
+    ``segment_speed``: optional (N - 1,) mm/s, the speed each segment i -> i + 1 is actually
+    moved at (``sim.as_planned``), instead of the mean of its two waypoints' speeds.
 
     Raises:
-        InputError: an extruding waypoint has a non-positive or non-finite speed.
+        InputError: an extruding waypoint has a non-positive or non-finite speed, or
+            ``segment_speed`` does not have one value per segment.
     """
     n = len(toolpath)
+    if segment_speed is not None and np.shape(segment_speed) != (max(n - 1, 0),):
+        raise InputError(f"segment speeds have shape {np.shape(segment_speed)}, the toolpath "
+                         f"has {max(n - 1, 0)} segments", "re-run mesp plan DIR")
     i = np.arange(max(n - 1, 0))
     dep = (toolpath.path[i] == toolpath.path[i + 1]) & toolpath.extrude[i] & toolpath.extrude[i + 1]
     i = i[dep]
@@ -212,7 +219,10 @@ def extrusion_segments(toolpath: Toolpath, morphology: Morphology,
     length = np.linalg.norm(d, axis=1)
     keep = length > tol.merge
     i, p0, p1, d, length = i[keep], p0[keep], p1[keep], d[keep], length[keep]
-    speed = 0.5 * (toolpath.speed[i] + toolpath.speed[i + 1])
+    if segment_speed is None:
+        speed = 0.5 * (toolpath.speed[i] + toolpath.speed[i + 1])
+    else:
+        speed = np.asarray(segment_speed, dtype=np.float64)[i]
     if speed.size and not (np.all(np.isfinite(speed)) and speed.min() > 0):
         raise InputError("the toolpath has extruding moves with a non-positive speed",
                          "re-run mesp slice")
@@ -323,7 +333,8 @@ def _half_extent(seg: Segments) -> NDArray[np.float64]:
 
 def deposit(toolpath: Toolpath, morphology: Morphology,
             config: DepositionConfig | None = None, grid: VoxelGrid | None = None,
-            progress: Progress | None = None) -> Deposit:
+            progress: Progress | None = None,
+            segment_speed: NDArray[np.float64] | None = None) -> Deposit:
     """Simulate the print of ``toolpath`` (see the module docstring for the model).
 
     Args:
@@ -332,6 +343,9 @@ def deposit(toolpath: Toolpath, morphology: Morphology,
         config: settings; defaults if None.
         grid: the voxel grid; by default the job's bounding box plus ``config.pad_mm``.
         progress: receives progress inside the deposition stage.
+        segment_speed: optional (N - 1,) mm/s, the speed each segment is actually moved at
+            (``sim.as_planned.segment_speeds``: the planned trajectory's), instead of the
+            toolpath's; a slower segment lasts longer and deposits C * dt.
 
     Returns:
         The deposit; volume is conserved (deposited == commanded up to float32 rounding).
@@ -339,7 +353,7 @@ def deposit(toolpath: Toolpath, morphology: Morphology,
     config = config or DepositionConfig()
     progress = progress or NullProgress()
     t0 = time.perf_counter()
-    seg = extrusion_segments(toolpath, morphology, config.center_offset)
+    seg = extrusion_segments(toolpath, morphology, config.center_offset, segment_speed)
     if grid is None:
         box = job_bounds(seg)
         grid = VoxelGrid.around(box[0], box[1], config.voxel_mm, config.pad_mm)
@@ -456,15 +470,18 @@ def _spread_chunk(fill: NDArray[np.float32], tags: NDArray[np.int32], grid: Voxe
 def covering_grid(toolpath: Toolpath, morphology: Morphology,
                   extra: NDArray[np.float64] | None = None,
                   config: DepositionConfig | None = None,
-                  max_voxels: int = MAX_VOXELS) -> VoxelGrid:
-    """The grid holding every filament of ``toolpath`` and the box ``extra`` ((2, 3) mm).
+                  max_voxels: int = MAX_VOXELS,
+                  segment_speed: NDArray[np.float64] | None = None) -> VoxelGrid:
+    """The grid holding every filament of ``toolpath`` (moved at ``segment_speed``, see
+    ``deposit``) and the box ``extra`` ((2, 3) mm).
 
     Raises:
         InputError: the grid would have more than ``max_voxels`` voxels of ``config.voxel_mm``
             (the default bounds what the inspection's metrics can handle).
     """
     config = config or DepositionConfig()
-    box = job_bounds(extrusion_segments(toolpath, morphology, config.center_offset))
+    box = job_bounds(extrusion_segments(toolpath, morphology, config.center_offset,
+                                        segment_speed))
     if extra is not None:
         extra = np.asarray(extra, dtype=np.float64)
         box = np.stack([np.minimum(box[0], extra[0]), np.maximum(box[1], extra[1])])

@@ -130,7 +130,10 @@ def _against_toolpath(job_dir: Path, extruded: float) -> str:
 def _inspect(job_dir: Path) -> None:
     from mesp_cell.cli import build_parser
 
-    inspect_args = build_parser().parse_args(["inspect", str(job_dir), "--quiet"])
+    argv = ["inspect", str(job_dir), "--quiet"]
+    if (job_dir / "trajectory.npz").is_file():
+        argv.append("--as-planned")  # also the print at the speeds the arm will move at
+    inspect_args = build_parser().parse_args(argv)
     inspect_args.func(inspect_args)
 
 
@@ -182,6 +185,16 @@ def _summary(job_dir: Path, printing_s: float = 0.0, time_scale: float = 0.0) ->
                 f"{100 * inspect.get('interior_infill_ratio', 0):.2f}%), pores "
                 f"{100 * inspect.get('pore_ratio', 0):.2f}%, surface error mean "
                 f"{surf.get('mean', float('nan')):.3f} mm",
+            )
+        )
+    planned = inspect.get("as_planned", {})
+    if planned:
+        rows.append(
+            (
+                "as planned",
+                f"{100 * planned.get('slowed_length_fraction', 0):.1f}% of the path slowed, "
+                f"{planned.get('extra_ink_mm3', 0):.0f} mm^3 more ink, surface error mean "
+                f"{planned.get('surface_error_mm', {}).get('mean', float('nan')):.3f} mm",
             )
         )
     width = max(len(k) for k, _ in rows)

@@ -34,6 +34,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "lines at the overlap W = beta w_f, one constant speed, 100% rectilinear infill, "
             "G-code written to DIR/baseline_prusaslicer.gcode; `make baselines` installs "
             "PrusaSlicer) or a commercial slicer's G-code (--gcode FILE), side by side. "
+            "With --as-planned also the print as DIR/trajectory.npz moves the nozzle: where "
+            "the planner slows down, the constant-rate extruder deposits more. "
             "Adds an 'inspect' section to DIR/report.json and writes inspect_*.png into DIR."
         ),
     )
@@ -65,6 +67,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "when mesp slice already did it)")
     p.add_argument("--filament", type=float, default=1.75, metavar="MM",
                    help="filament diameter the G-code's E refers to (0 = volumetric E)")
+    p.add_argument("--as-planned", action="store_true",
+                   help="also print at the speeds the planned trajectory (DIR/trajectory.npz, "
+                        "from mesp plan) moves each segment at, and compare")
     p.add_argument("--no-figures", action="store_true", help="do not write the PNG pictures")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=run)
@@ -93,6 +98,8 @@ def run(args: argparse.Namespace) -> int:
     if args.flush and not (job / "tetmesh.npz").is_file():
         raise InputError(f"--flush needs {job / 'tetmesh.npz'}",
                          f"re-run mesp slice MODEL --out {job}")
+    if args.as_planned and not (job / "trajectory.npz").is_file():
+        raise InputError(f"--as-planned needs {job / 'trajectory.npz'}", f"run mesp plan {job}")
     if args.gcode is not None and not Path(args.gcode).is_file():
         raise InputError(f"G-code file {args.gcode} does not exist", "check the --gcode path")
     if args.filament < 0:
@@ -124,9 +131,16 @@ def run(args: argparse.Namespace) -> int:
     elif args.flush:
         with timer.stage("flush"):
             toolpath, flush = _flush(job, toolpath, morphology)
+    planned = _planned_speeds(job, toolpath) if args.as_planned else None
     result = _simulate("multi-axis", toolpath, morphology, vertices, faces, config, timer)
     section: dict[str, Any] = {**result["summary"], "voxel_mm": config.voxel_mm,
                                "profile": profile_name}
+    if planned is not None:
+        as_planned = _simulate("as planned", toolpath, morphology, vertices, faces, config,
+                               timer, planned.speed)
+        section["as_planned"] = {**as_planned["summary"], **_slowdown(toolpath, planned),
+                                 "extra_ink_mm3": as_planned["summary"]["commanded_volume_mm3"]
+                                 - result["summary"]["commanded_volume_mm3"]}
     if flush is not None:
         section["flush"] = flush
     base: dict[str, Any] | None = None
@@ -166,6 +180,8 @@ def run(args: argparse.Namespace) -> int:
     section["timing_s"] = {k: round(v, 3) for k, v in timer.seconds.items()}
     update_report(job, {"inspect": section})
     columns = [("multi-axis", result["summary"])]
+    if "as_planned" in section:
+        columns.append(("as planned", section["as_planned"]))
     if "baselines" in section:
         columns += [(f"planar-{m}", b) for m, b in section["baselines"].items()]
     elif base is not None:
@@ -214,15 +230,44 @@ def _load_morphology(name: str | None, console: Any) -> tuple[Any, str]:
     return load_profile(chosen), chosen
 
 
+def _planned_speeds(job: Path, toolpath: Any) -> Any:
+    """sim.as_planned.segment_speeds of DIR/trajectory.npz (one-line errors if unusable)."""
+    from planner.trajectory import Trajectory
+    from sim.as_planned import segment_speeds
+
+    try:
+        trajectory = Trajectory.load(job)
+    except (OSError, ValueError, KeyError) as exc:
+        raise InputError(f"{job / 'trajectory.npz'} is not a readable trajectory ({exc})",
+                         f"re-run mesp plan {job}") from exc
+    return segment_speeds(toolpath, trajectory)
+
+
+def _slowdown(toolpath: Any, planned: Any) -> dict[str, Any]:
+    """How much of the extruding path the trajectory moves slower than the toolpath asks."""
+    from sim.as_planned import SLOWED
+
+    i = np.arange(max(len(toolpath) - 1, 0))
+    dep = (toolpath.path[i] == toolpath.path[i + 1]) & toolpath.extrude[i] \
+        & toolpath.extrude[i + 1] & (planned.duration > 0)
+    length = np.linalg.norm(np.diff(toolpath.position, axis=0), axis=1)[dep]
+    slowed = planned.ratio[dep] < SLOWED
+    return {"slowed_length_fraction": float(length[slowed].sum() / max(length.sum(), 1e-12)),
+            "speed_ratio_min": float(planned.ratio[dep].min()) if dep.any() else 1.0}
+
+
 def _simulate(label: str, toolpath: Any, morphology: Any, vertices: np.ndarray,
-              faces: np.ndarray, config: Any, timer: Any) -> dict[str, Any]:
+              faces: np.ndarray, config: Any, timer: Any,
+              segment_speed: np.ndarray | None = None) -> dict[str, Any]:
     from sim.deposition import covering_grid, deposit
     from sim.metrics import inspect_deposit
 
     bounds = np.stack([vertices.min(axis=0), vertices.max(axis=0)])
     with timer.stage(f"{label} deposition"):
-        grid = covering_grid(toolpath, morphology, bounds, config)
-        dep = deposit(toolpath, morphology, config, grid=grid, progress=timer.progress)
+        grid = covering_grid(toolpath, morphology, bounds, config,
+                             segment_speed=segment_speed)
+        dep = deposit(toolpath, morphology, config, grid=grid, progress=timer.progress,
+                      segment_speed=segment_speed)
     with timer.stage(f"{label} metrics"):
         quality = inspect_deposit(dep, vertices, faces, toolpath)
     summary = quality.summary()

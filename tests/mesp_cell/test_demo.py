@@ -165,14 +165,19 @@ def test_demo_summary_compares_extruded_volume_and_pace(
     (tmp_path / "report.json").write_text(json.dumps({
         "toolpath": {"deposited_volume_mm3": 1000.0, "waypoints": 10, "length_mm": 100.0,
                      "volume_error": 0.001},
-        "plan": {"duration_s": 800.0}}))
+        "plan": {"duration_s": 800.0},
+        "inspect": {"infill_ratio": 0.98, "interior_infill_ratio": 0.995, "pore_ratio": 0.001,
+                    "surface_error_mm": {"mean": 0.2},
+                    "as_planned": {"slowed_length_fraction": 0.02, "extra_ink_mm3": 12.0,
+                                   "surface_error_mm": {"mean": 0.21}}}}))
     assert _against_toolpath(tmp_path, 1010.0) == " (+1.0% of the toolpath's 1000)"
     assert "warning" not in capsys.readouterr().err
     assert _against_toolpath(tmp_path, 2900.0) == " (+190.0% of the toolpath's 1000)"
     assert "warning: the extruder delivered +190.0%" in capsys.readouterr().err
     _summary(tmp_path, printing_s=20.0, time_scale=80.0)
-    assert "800 s of printing, printed in 20 s on the twin: 40x (asked 80x)" in (
-        capsys.readouterr().out)
+    out = capsys.readouterr().out
+    assert "800 s of printing, printed in 20 s on the twin: 40x (asked 80x)" in out
+    assert "2.0% of the path slowed, 12 mm^3 more ink, surface error mean 0.210 mm" in out
 
     class Job:
         layer, layers, percent, eta_s, volume = 0, 3, 0.0, 0.0, 0.0

@@ -91,6 +91,7 @@ def test_inspect_with_planar_and_gcode_baselines(job: Path) -> None:
         (["inspect", "{job}", "--voxel", "-1"], "--voxel"),
         (["inspect", "{job}", "--gcode", "{missing}"], "does not exist"),
         (["inspect", "{job}", "--flush"], "tetmesh.npz"),
+        (["inspect", "{job}", "--as-planned"], "mesp plan"),
     ],
 )
 def test_user_mistakes_are_one_line(job: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
@@ -191,3 +192,52 @@ def test_inspect_cli_names_the_model_when_model_ply_is_gone(
     assert main(["inspect", str(job), "--baseline", "prusaslicer", "--quiet"]) == 2
     err = capsys.readouterr().err
     assert "no model.ply" in err and "mesp slice parts/box.stl" in err
+
+
+def _save_trajectory(job: Path, slow: float, n: int | None = None) -> None:
+    """A trajectory passing each waypoint of DIR's toolpath (or of ``n`` waypoints) at the
+    toolpath's speed, ``slow`` times slower on the segments of layer 1."""
+    from planner.trajectory import Trajectory
+    from slicer.stages import Toolpath
+
+    tp = Toolpath.load(job)
+    length = np.linalg.norm(np.diff(tp.position, axis=0), axis=1)
+    dt = np.maximum(length, 0.01) / np.maximum(0.5 * (tp.speed[:-1] + tp.speed[1:]), 1e-9)
+    dt = np.where(tp.layer[:-1] == 1, slow * dt, dt)
+    t = np.concatenate([[0.0], np.cumsum(dt)])
+    m = len(t) if n is None else n
+    Trajectory(t=t[:m], q=np.zeros((m, 6)), qd=np.zeros((m, 6)), tcp=np.zeros((m, 3)),
+               waypoint=np.arange(m, dtype=np.int32), alpha=np.full(m, 90.0),
+               extrude=tp.extrude[:m].copy(), base_T=np.eye(4), tool_T=np.eye(4),
+               model_T=np.eye(4)).save(job)
+
+
+def test_inspect_as_planned_prints_at_the_trajectory_speeds(
+        job: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _save_trajectory(job, slow=3.0)
+    assert main(["inspect", str(job), "--voxel", "0.25", "--as-planned", "--quiet",
+                 "--no-figures"]) == 0
+    section = read_report(job)["inspect"]
+    planned = section["as_planned"]
+    assert 0.1 < planned["slowed_length_fraction"] < 0.9
+    assert planned["speed_ratio_min"] == pytest.approx(1.0 / 3.0, rel=1e-6)
+    # layer 1's ink is deposited three times over: more ink, more of it outside the model
+    assert planned["extra_ink_mm3"] > 0.2 * section["commanded_volume_mm3"]
+    assert planned["over_deposition"] > section["over_deposition"]
+    assert abs(planned["volume_conservation_error"]) < 0.02
+    assert "as planned" in capsys.readouterr().out
+    # at the toolpath's own speeds the two prints are the same
+    _save_trajectory(job, slow=1.0)
+    assert main(["inspect", str(job), "--voxel", "0.25", "--as-planned", "--quiet",
+                 "--no-figures"]) == 0
+    section = read_report(job)["inspect"]
+    assert section["as_planned"]["extra_ink_mm3"] == pytest.approx(0.0, abs=1e-6)
+    assert section["as_planned"]["infill_ratio"] == pytest.approx(section["infill_ratio"])
+
+
+def test_inspect_as_planned_refuses_another_jobs_trajectory(
+        job: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    _save_trajectory(job, slow=1.0, n=10)
+    assert main(["inspect", str(job), "--as-planned", "--quiet", "--no-figures"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "planned for another toolpath" in err

@@ -1,0 +1,63 @@
+"""The speed a planned trajectory moves the nozzle at along each toolpath segment.
+
+The virtual print of ``toolpath.npz`` assumes the nozzle moves at the speeds the slicer set.
+The planner slows down where the arm cannot follow them (sharp turns at speed, joint
+acceleration limits: ``plan.speed_ratio`` in report.json) while the extruder keeps pushing
+C mm^3/s, so a segment that takes longer deposits more: C * dt instead of C * L / v, in a
+fatter filament (area C / v at the slower speed). ``segment_speeds`` measures, per toolpath
+segment, the speed the trajectory actually moves it at: the segment's length over the time
+between the samples of its two waypoints. ``sim.deposition.deposit(..., segment_speed=...)``
+prints with it (``mesp inspect DIR --as-planned``).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from planner.trajectory import Trajectory
+from slicer.errors import InputError
+from slicer.stages import Toolpath
+
+SLOWED = 0.95  # a segment moved at less than this x its toolpath speed counts as slowed
+
+
+class PlannedSpeeds(NamedTuple):
+    """Per toolpath segment i -> i + 1 (N - 1 of them, in toolpath order).
+
+    speed: (N - 1,) float64, mm/s, segment length / time the trajectory takes for it.
+    ratio: (N - 1,) float64, speed over the toolpath's (the mean of its two waypoints'
+        speeds, as ``sim.deposition`` uses it); 1 for zero-length segments.
+    duration: (N - 1,) float64, s, the time between the two waypoints' samples.
+    """
+
+    speed: NDArray[np.float64]
+    ratio: NDArray[np.float64]
+    duration: NDArray[np.float64]
+
+
+def segment_speeds(toolpath: Toolpath, trajectory: Trajectory) -> PlannedSpeeds:
+    """The speed ``trajectory`` moves each segment of ``toolpath`` at (see the module doc).
+
+    Raises:
+        InputError: the trajectory was not planned for this toolpath (its samples do not
+            pass each waypoint once, in order).
+    """
+    n = len(toolpath)
+    wp = np.asarray(trajectory.waypoint, dtype=np.int64)
+    rows = np.flatnonzero(wp >= 0)
+    if len(rows) != n or not np.array_equal(wp[rows], np.arange(n)):
+        raise InputError(
+            f"trajectory.npz passes {len(np.unique(wp[rows]))} waypoints, the toolpath has {n}: "
+            "it was planned for another toolpath", "re-run mesp plan DIR")
+    t = np.asarray(trajectory.t, dtype=np.float64)[rows]
+    duration = np.diff(t)
+    length = np.linalg.norm(np.diff(toolpath.position, axis=0), axis=1)
+    target = 0.5 * (toolpath.speed[:-1] + toolpath.speed[1:])
+    moving = length > 0.0
+    # t increases strictly (Trajectory checks it), so every duration is positive
+    speed = np.where(moving, length / np.maximum(duration, 1e-12), target)
+    ratio = np.where(moving & (target > 0), speed / np.maximum(target, 1e-12), 1.0)
+    return PlannedSpeeds(speed=speed, ratio=ratio, duration=duration)
