@@ -237,6 +237,8 @@ def _planned_speeds(job: Path, toolpath: Any) -> Any:
 
     try:
         trajectory = Trajectory.load(job)
+    except InputError as exc:  # unreadable, or an array missing: name the stage that writes it
+        raise InputError(exc.problem, f"re-run mesp plan {job}") from exc
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(f"{job / 'trajectory.npz'} is not a readable trajectory ({exc})",
                          f"re-run mesp plan {job}") from exc

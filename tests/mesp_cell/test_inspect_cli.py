@@ -241,3 +241,7 @@ def test_inspect_as_planned_refuses_another_jobs_trajectory(
     assert main(["inspect", str(job), "--as-planned", "--quiet", "--no-figures"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "planned for another toolpath" in err
+    np.savez(job / "trajectory.npz", t=np.arange(3.0))  # not a trajectory
+    assert main(["inspect", str(job), "--as-planned", "--quiet", "--no-figures"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.endswith(f"re-run mesp plan {job}")
