@@ -108,3 +108,35 @@ def layer_plot(path: Path, quality: Quality, baseline: Quality | None = None,
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return Path(path)
+
+
+def slowdown_plot(path: Path, layer: np.ndarray, length_mm: np.ndarray, ratio: np.ndarray,
+                  extra_mm3: np.ndarray, slowed: float) -> Path:
+    """Save, per layer, the share of the extruding path the planned trajectory moves slower
+    than ``slowed`` x its toolpath speed, and the extra ink that lands there.
+
+    layer, length_mm, ratio, extra_mm3: (S,) per extruding segment: layer, mm, planned over
+    toolpath speed, mm^3 deposited beyond the toolpath's (C * dt - C * L / v).
+    """
+    fig, ax = plt.subplots(figsize=(8, 4))
+    layers = np.unique(layer)
+    if layers.size:
+        idx = np.searchsorted(layers, layer)
+        total = np.bincount(idx, weights=length_mm, minlength=layers.size)
+        slow = np.bincount(idx, weights=np.where(ratio < slowed, length_mm, 0.0),
+                           minlength=layers.size)
+        extra = np.bincount(idx, weights=extra_mm3, minlength=layers.size)
+        ax.bar(layers, 100 * slow / np.maximum(total, 1e-12), color="tab:orange",
+               label=f"path below {100 * slowed:.0f} % of its speed")
+        twin = ax.twinx()
+        twin.plot(layers, extra, ".-", color="tab:red", lw=0.8, label="extra ink")
+        twin.set_ylabel("extra ink, mm^3")
+        twin.legend(loc="upper right")
+    ax.set_xlabel("layer")
+    ax.set_ylabel("% of the layer's extruding path")
+    ax.legend(loc="upper left")
+    ax.set_title("as planned: where the arm slows down and the extruder does not")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return Path(path)

@@ -177,6 +177,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_figures:
         with timer.stage("figures"):
             section["figures"] = _figures(job, result, base)
+            if planned is not None:
+                section["figures"].append(_slowdown_figure(job, toolpath, planned, morphology))
     section["timing_s"] = {k: round(v, 3) for k, v in timer.seconds.items()}
     update_report(job, {"inspect": section})
     columns = [("multi-axis", result["summary"])]
@@ -371,6 +373,19 @@ def _figures(job: Path, result: dict[str, Any], base: dict[str, Any] | None) -> 
     files.append(layer_plot(job / "inspect_layers.png", result["quality"],
                             base["quality"] if base else None))
     return [p.name for p in files]
+
+
+def _slowdown_figure(job: Path, toolpath: Any, planned: Any, morphology: Any) -> str:
+    """inspect_as_planned.png: per layer, the slowed share of the path and its extra ink."""
+    from sim.as_planned import SLOWED
+    from sim.deposition import extrusion_segments
+    from sim.inspect_figures import slowdown_plot
+
+    seg = extrusion_segments(toolpath, morphology)
+    i = seg.waypoint
+    extra = morphology.rate_mm3_s * planned.duration[i] - seg.volume
+    return slowdown_plot(job / "inspect_as_planned.png", seg.layer, seg.length,
+                         planned.ratio[i], extra, SLOWED).name
 
 
 def _comparison(main: dict[str, Any], base: dict[str, Any]) -> dict[str, Any]:

@@ -215,9 +215,10 @@ def _save_trajectory(job: Path, slow: float, n: int | None = None) -> None:
 def test_inspect_as_planned_prints_at_the_trajectory_speeds(
         job: Path, capsys: pytest.CaptureFixture[str]) -> None:
     _save_trajectory(job, slow=3.0)
-    assert main(["inspect", str(job), "--voxel", "0.25", "--as-planned", "--quiet",
-                 "--no-figures"]) == 0
+    assert main(["inspect", str(job), "--voxel", "0.25", "--as-planned", "--quiet"]) == 0
     section = read_report(job)["inspect"]
+    assert "inspect_as_planned.png" in section["figures"]
+    assert (job / "inspect_as_planned.png").stat().st_size > 1000
     planned = section["as_planned"]
     assert 0.1 < planned["slowed_length_fraction"] < 0.9
     assert planned["speed_ratio_min"] == pytest.approx(1.0 / 3.0, rel=1e-6)
