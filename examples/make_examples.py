@@ -74,7 +74,9 @@ planar = true
 # above the cavity follow the dome (a 3-9 mm shell), and their H reaches 3 mm, beyond the
 # extrusion profile's range. 0.70 mm gives the paper's 24 layers and a much better virtual
 # print (surface error 0.25 against 0.49 mm), but its thin dome layers tilt the nozzle
-# steeply at the dome's edge and the bundled cell refused 2 of 3 such plans (README).
+# steeply at the dome's edge and the bundled cell refused 2 of 3 such plans; where it plans,
+# the arm slows down on the dome (printed at 12-25 mm/s), and the print as planned
+# (mesp inspect --as-planned) has 0.29 mm. 0.85 and 0.95 mm: refused too (README).
 [mesh]
 edge_length_mm = 1.7
 
