@@ -209,7 +209,13 @@ def _weld_crossings(
     faces = welded[inverse.reshape(-1, 3)]
     f0, f1, f2 = faces.T
     keep = (f0 != f1) & (f1 != f2) & (f0 != f2)
-    return faces[keep], verts, tet_of_tri[keep]
+    faces = faces[keep]
+    if keep.all():
+        return faces, verts, tet_of_tri
+    # a vertex whose every triangle collapsed belongs to no face: drop it (it would get no
+    # area-weighted gradient, hence no height or direction)
+    kept, remap = np.unique(faces, return_inverse=True)
+    return remap.reshape(-1, 3), verts[kept], tet_of_tri[keep]
 
 
 def iso_surfaces(mesh: TetOperators | TetMesh, field: Field,
@@ -273,6 +279,8 @@ def iso_surfaces(mesh: TetOperators | TetMesh, field: Field,
         local = tri_local[valid]  # (m, 3)
         edge_ids = np.take_along_axis(edges.of_tet[tet_of_tri], local, axis=1)
         faces, verts, tet_of_tri = _weld_crossings(edge_ids, edges, g, x, c, tet_of_tri)
+        if len(faces) == 0:
+            continue  # every triangle collapsed onto mesh vertices
         # Orient along the growth direction (the cut tet's gradient).
         p = verts[faces]
         normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])

@@ -169,6 +169,21 @@ def test_curved_ring_layers_are_welded_consistent_manifolds() -> None:
     assert len(top.vertices) - len(edges) + len(top.faces) == 0
 
 
+def test_collapsed_triangles_leave_no_vertex_behind() -> None:
+    # two tets; the level passes 1e-4 above the apex of the first, so its three crossings
+    # snap onto that apex and its triangle collapses; the second tet's crossings stay
+    x = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [5, 0, 0], [6, 0, 0],
+                  [5, 1, 0], [5, 0, 1]])
+    tets = np.array([[0, 1, 2, 3], [4, 5, 6, 7]], dtype=np.int32)
+    g = np.array([0.0, 1, 1, 1, 0, 1, 1, 1])
+    layers = iso_surfaces(TetMesh(x, tets), Field(g, np.array([1e-4, 0.5])))
+    low = layers.layer(0)
+    assert len(low.faces) == 0 and len(low.vertices) == 0
+    assert np.all(np.isfinite(layers.vertex_height))
+    assert np.all(np.isfinite(layers.vertex_direction))
+    assert len(np.unique(layers.faces)) == len(layers.vertices)
+
+
 def test_extract_from_mesh_and_mismatch(box: TetMesh) -> None:
     g = box.vertices[:, 2].copy()
     out = extract_layers(box, Field(g=g, iso=np.array([1.0, 3.0])))
