@@ -1122,6 +1122,15 @@ def _pct(values: NDArray[np.float64]) -> dict[str, float | int]:
     return {"p50": float(p50), "p90": float(p90), "p95": float(p95), "n": int(values.size)}
 
 
+def _pct_range(values: NDArray[np.float64]) -> dict[str, float]:
+    """min, p5, p50, p95, max of ``values`` (NaN for none)."""
+    if values.size == 0:
+        return {k: float("nan") for k in ("min", "p5", "p50", "p95", "max")}
+    p5, p50, p95 = np.percentile(values, [5, 50, 95])
+    return {"min": float(values.min()), "p5": float(p5), "p50": float(p50), "p95": float(p95),
+            "max": float(values.max())}
+
+
 def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile) -> tuple[
     dict[str, Any], dict[str, dict[str, NDArray[np.float64]]], str, dict[str, float]
 ]:
@@ -1211,6 +1220,10 @@ def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile)
                     "layer_height_range_mm": list(profile.layer_height_range)},
         "speed_mm_s": {"min": float(tp.speed.min()) if len(tp) else 0.0,
                        "max": float(tp.speed.max()) if len(tp) else 0.0},
+        # the width printed over the profile's W(H) at extruding waypoints: what pitch_width,
+        # the flow fit and first_layer_beta change (1 everywhere without them)
+        "width_over_profile": _pct_range(tp.width[tp.extrude]
+                                         / profile.width(tp.height[tp.extrude])),
     }
     failed = [f"layer {r.index}: {c.error}" for r in results for c in r.components if c.error]
     report["failed_components"] = {"count": len(failed), "reasons": failed[:20]}

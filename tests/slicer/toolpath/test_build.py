@@ -482,6 +482,9 @@ def test_contours_on_a_band_print_as_wide_as_its_pitch() -> None:
     ext = tp.extrude
     w, x = tp.width[ext], tp.position[ext, 0]
     assert np.ptp(tp_fixed.width[tp_fixed.extrude]) < 1e-9
+    spread = fitted["width_over_profile"]
+    assert spread["min"] < 0.97 < 1.03 < spread["max"] < 1.5
+    assert fixed["width_over_profile"]["max"] - fixed["width_over_profile"]["min"] < 1e-9
     assert np.median(w[np.abs(x) < 3.0]) > 1.05 * np.median(w[x > 12.0])
     assert np.median(w[np.abs(x) < 3.0]) > 1.05 * np.median(w[x < -12.0])
     # eq. 4's W = C / (H v) still holds at every waypoint, speeds within the profile's table
