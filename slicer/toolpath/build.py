@@ -610,12 +610,16 @@ class _Component:
             v = self.flowed_speed(v, interpolate(scale, self.faces, face, bary))
         return h, v, self.profile.rate_mm3_s / (h * v)
 
-    def flowed_speed(self, speed: NDArray[np.float64], flow: NDArray[np.float64] | float
-                     ) -> NDArray[np.float64]:
-        """Speed of lines printed at ``flow`` x the profile's volume per length: divided by
-        ``flow``, never beyond the table's speeds unless it already was."""
-        return np.clip(speed / flow, np.minimum(self.v_lo, speed),
-                       np.maximum(self.v_hi, speed))
+    def flowed_speed(self, speed: NDArray[np.float64], flow: NDArray[np.float64] | float,
+                     nominal: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
+        """Speed of lines printed at ``flow`` x the volume per length of ``speed``: divided
+        by ``flow``, never beyond the table's speeds unless it already was; with
+        ``nominal`` (the profile's speed at H) the width stays within CENTRE_WIDTH_SCALE of
+        W(H) however many scalings compound (a centre line's band width, then the flow fit)."""
+        v = speed / flow
+        if nominal is not None:
+            v = np.clip(v, nominal / CENTRE_WIDTH_SCALE[1], nominal / CENTRE_WIDTH_SCALE[0])
+        return np.clip(v, np.minimum(self.v_lo, speed), np.maximum(self.v_hi, speed))
 
     def build(self, lines_found: SurfaceLines, level_of: NDArray[np.float64] | None,
               spacing: float, start: NDArray[np.float64], lifter: Lifter, lift: float,
@@ -772,10 +776,11 @@ def _component_toolpath_unsafe(
             return match_volume(evaluate, required, cfg.volume_tolerance, tau, 1)
         return match_volume(evaluate, required, cfg.volume_tolerance)
 
-    def flowed_width(width: NDArray[np.float64], speed: NDArray[np.float64], flow: float
-                     ) -> NDArray[np.float64]:
+    def flowed_width(width: NDArray[np.float64], speed: NDArray[np.float64], flow: float,
+                     nominal: NDArray[np.float64]) -> NDArray[np.float64]:
         """W of those lines (W = C / (H v): W x v stays)."""
-        return width if flow == 1.0 else width * speed / comp.flowed_speed(speed, flow)
+        return (width if flow == 1.0
+                else width * speed / comp.flowed_speed(speed, flow, nominal))
 
     def fit_flow(built: _Built) -> _Built:
         """The nozzle speed scaled so the lines deposit the required volume (W = C / (H v)
@@ -786,7 +791,7 @@ def _component_toolpath_unsafe(
         if volume <= 0 or required <= 0:
             return built
         flow = float(np.clip(required / volume, *CENTRE_WIDTH_SCALE))
-        speed = comp.flowed_speed(wp.speed, flow)
+        speed = comp.flowed_speed(wp.speed, flow, comp.profile.speed_at(wp.height))
         width = wp.width * wp.speed / speed
         return replace(built, waypoints=replace(wp, speed=speed, width=width),
                        flow=built.flow * flow)
@@ -864,9 +869,9 @@ def _component_toolpath_unsafe(
                 scale: NDArray[np.float64] | None = None) -> tuple[NDArray[np.float64], int]:
         """Width error of ``lines`` against the width they print at ``flow`` (and the
         per-vertex width ``scale``)."""
-        _, v_pt, w_pt = comp.values_at(lines.face, lines.bary, scale)
-        return _measure(lines, flowed_width(w_pt, v_pt, flow), comp.normals[lines.face],
-                        boundary)
+        h_pt, v_pt, w_pt = comp.values_at(lines.face, lines.bary, scale)
+        return _measure(lines, flowed_width(w_pt, v_pt, flow, comp.profile.speed_at(h_pt)),
+                        comp.normals[lines.face], boundary)
 
     # against the width the waypoints carry (flow-fitted components print wider or
     # narrower lines on purpose), and against the profile's W(H) for comparison

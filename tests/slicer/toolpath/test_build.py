@@ -373,6 +373,24 @@ def test_centre_line_prints_as_wide_as_its_band() -> None:
     assert widths[False][0] == pytest.approx(widths[False][1], rel=0.01)
 
 
+def test_width_scalings_compound_within_the_limit() -> None:
+    # a centre line 1.5 W wide (its band) whose flow fit asks 1.5x more still prints at most
+    # 1.5 W(H): W = C / (H v) with v never below the profile's speed / 1.5
+    from slicer.config import ToolpathConfig
+    from slicer.toolpath.build import CENTRE_WIDTH_SCALE, _Component, split_layers
+
+    v, f = disc_mesh(8.0, 1.0)
+    layer = split_layers(flat_layer(v, f, 1.0))[0]
+    comp = _Component(layer, np.arange(len(f)), PATTERN_CONTOUR, ToolpathConfig(), PROFILE)
+    nominal = PROFILE.speed_at(np.array([1.0, 1.0]))
+    lo, hi = CENTRE_WIDTH_SCALE
+    wide = comp.flowed_speed(nominal, hi)  # the band's width: 1.5 W
+    assert wide == pytest.approx(nominal / hi)
+    assert comp.flowed_speed(wide, hi) == pytest.approx(nominal / hi**2)  # unbounded
+    assert comp.flowed_speed(wide, hi, nominal) == pytest.approx(nominal / hi)
+    assert comp.flowed_speed(nominal, 0.3, nominal) == pytest.approx(nominal / lo)
+
+
 def test_narrow_band_on_a_stripe_layer_gets_contours() -> None:
     """An annulus 1.7 W wide (W = 4.55 mm at H = 1 mm): stripes across it would be stubs
     shorter than W, so the stripe layer prints it like a contour layer: two fitted loops
