@@ -18,6 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from planner.trajectory import Trajectory
+from sim.deposition import Morphology, extrusion_segments
 from slicer.errors import InputError
 from slicer.stages import Toolpath
 
@@ -61,3 +62,34 @@ def segment_speeds(toolpath: Toolpath, trajectory: Trajectory) -> PlannedSpeeds:
     speed = np.where(moving, length / np.maximum(duration, 1e-12), target)
     ratio = np.where(moving & (target > 0), speed / np.maximum(target, 1e-12), 1.0)
     return PlannedSpeeds(speed=speed, ratio=ratio, duration=duration)
+
+
+class Slowdown(NamedTuple):
+    """The extruding segments of a toolpath as a trajectory moves them (print order).
+
+    layer: (S,) int32; length: (S,) float64, mm; ratio: (S,) float64, planned over toolpath
+    speed; extra_mm3: (S,) float64, ink deposited beyond the toolpath's, C * dt - C * L / v.
+    """
+
+    layer: NDArray[np.int32]
+    length: NDArray[np.float64]
+    ratio: NDArray[np.float64]
+    extra_mm3: NDArray[np.float64]
+
+    def summary(self) -> dict[str, float]:
+        """``slowed_length_fraction`` (below SLOWED x its speed), ``speed_ratio_min`` and
+        ``extra_ink_mm3`` (report.json's inspect.as_planned)."""
+        slowed = self.ratio < SLOWED
+        return {"slowed_length_fraction":
+                float(self.length[slowed].sum() / max(float(self.length.sum()), 1e-12)),
+                "speed_ratio_min": float(self.ratio.min()) if self.ratio.size else 1.0,
+                "extra_ink_mm3": float(self.extra_mm3.sum())}
+
+
+def slowdown(toolpath: Toolpath, planned: PlannedSpeeds, morphology: Morphology) -> Slowdown:
+    """Per extruding segment (``sim.deposition.extrusion_segments``), how the trajectory's
+    speed and the constant-rate extruder change what the toolpath asked for."""
+    seg = extrusion_segments(toolpath, morphology)
+    i = seg.waypoint
+    return Slowdown(layer=seg.layer, length=seg.length, ratio=planned.ratio[i],
+                    extra_mm3=morphology.rate_mm3_s * planned.duration[i] - seg.volume)

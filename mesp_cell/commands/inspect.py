@@ -136,11 +136,12 @@ def run(args: argparse.Namespace) -> int:
     section: dict[str, Any] = {**result["summary"], "voxel_mm": config.voxel_mm,
                                "profile": profile_name}
     if planned is not None:
+        from sim.as_planned import slowdown
+
         as_planned = _simulate("as planned", toolpath, morphology, vertices, faces, config,
                                timer, planned.speed)
-        section["as_planned"] = {**as_planned["summary"], **_slowdown(toolpath, planned),
-                                 "extra_ink_mm3": as_planned["summary"]["commanded_volume_mm3"]
-                                 - result["summary"]["commanded_volume_mm3"]}
+        section["as_planned"] = {**as_planned["summary"],
+                                 **slowdown(toolpath, planned, morphology).summary()}
     if flush is not None:
         section["flush"] = flush
     base: dict[str, Any] | None = None
@@ -245,19 +246,6 @@ def _planned_speeds(job: Path, toolpath: Any) -> Any:
         raise InputError(f"{job / 'trajectory.npz'} is not a readable trajectory ({exc})",
                          f"re-run mesp plan {job}") from exc
     return segment_speeds(toolpath, trajectory)
-
-
-def _slowdown(toolpath: Any, planned: Any) -> dict[str, Any]:
-    """How much of the extruding path the trajectory moves slower than the toolpath asks."""
-    from sim.as_planned import SLOWED
-
-    i = np.arange(max(len(toolpath) - 1, 0))
-    dep = (toolpath.path[i] == toolpath.path[i + 1]) & toolpath.extrude[i] \
-        & toolpath.extrude[i + 1] & (planned.duration > 0)
-    length = np.linalg.norm(np.diff(toolpath.position, axis=0), axis=1)[dep]
-    slowed = planned.ratio[dep] < SLOWED
-    return {"slowed_length_fraction": float(length[slowed].sum() / max(length.sum(), 1e-12)),
-            "speed_ratio_min": float(planned.ratio[dep].min()) if dep.any() else 1.0}
 
 
 def _simulate(label: str, toolpath: Any, morphology: Any, vertices: np.ndarray,
@@ -377,15 +365,12 @@ def _figures(job: Path, result: dict[str, Any], base: dict[str, Any] | None) -> 
 
 def _slowdown_figure(job: Path, toolpath: Any, planned: Any, morphology: Any) -> str:
     """inspect_as_planned.png: per layer, the slowed share of the path and its extra ink."""
-    from sim.as_planned import SLOWED
-    from sim.deposition import extrusion_segments
+    from sim.as_planned import SLOWED, slowdown
     from sim.inspect_figures import slowdown_plot
 
-    seg = extrusion_segments(toolpath, morphology)
-    i = seg.waypoint
-    extra = morphology.rate_mm3_s * planned.duration[i] - seg.volume
-    return slowdown_plot(job / "inspect_as_planned.png", seg.layer, seg.length,
-                         planned.ratio[i], extra, SLOWED).name
+    slow = slowdown(toolpath, planned, morphology)
+    return slowdown_plot(job / "inspect_as_planned.png", slow.layer, slow.length, slow.ratio,
+                         slow.extra_mm3, SLOWED).name
 
 
 def _comparison(main: dict[str, Any], base: dict[str, Any]) -> dict[str, Any]:

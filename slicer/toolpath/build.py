@@ -375,10 +375,9 @@ class _Surface:
         lines printed at W x this ratio (the nozzle speed sets it, W = C / (H v)) abut
         instead of overlapping by 8 %, and the band gets the ink its area needs. Not where
         eq. 9's iso-lines fill holes in the fitting (no band there, no pitch), and not on
-        stripes: their local spacing 2 pi / |grad psi| (tried in session 11) is off near the
-        ends trim_converging cuts back, and printing at it left more gel (membrane interior
-        infill 96.03 -> 95.73 %, aorta 99.55 -> 99.36 %, stripe p90 27.4 -> 26.7 % and
-        33.6 -> 35.0 %)."""
+        stripes: their local spacing 2 pi / |grad psi| is off next to the ends
+        trim_converging cuts back (tried: the membrane's and the aorta's prints kept more
+        gel; README, session 11)."""
         sides = self.sides() if self.fit_bands and pattern == PATTERN_CONTOUR else None
         if sides is None or self.fill_holes:
             return None

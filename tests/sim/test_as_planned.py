@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from planner.trajectory import Trajectory
-from sim.as_planned import segment_speeds
+from sim.as_planned import segment_speeds, slowdown
 from sim.deposition import DepositionConfig, EllipseMorphology, deposit, extrusion_segments
 from slicer.errors import InputError
 from slicer.stages import Toolpath
@@ -65,6 +65,10 @@ def test_a_slowed_segment_deposits_the_ink_of_its_time() -> None:
     assert slow.volume.sum() == pytest.approx(c * planned.duration.sum())
     assert slow.volume[10] == pytest.approx(3.0 * base.volume[10])
     assert slow.width[10] * slow.height[10] == pytest.approx(3.0 * base.width[10] * base.height[10])
+    summary = slowdown(tp, planned, morph).summary()
+    assert summary["extra_ink_mm3"] == pytest.approx(2.0 * base.volume[10])
+    assert summary["slowed_length_fraction"] == pytest.approx(1 / 20)
+    assert summary["speed_ratio_min"] == pytest.approx(1 / 3)
     cfg = DepositionConfig(voxel_mm=0.2)
     printed = deposit(tp, morph, cfg, segment_speed=planned.speed)
     assert printed.commanded_mm3 == pytest.approx(c * planned.duration.sum())
