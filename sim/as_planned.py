@@ -6,7 +6,10 @@ acceleration limits: ``plan.speed_ratio`` in report.json) while the extruder kee
 C mm^3/s, so a segment that takes longer deposits more: C * dt instead of C * L / v, in a
 fatter filament (area C / v at the slower speed). ``segment_speeds`` measures, per toolpath
 segment, the speed the trajectory actually moves it at: the segment's length over the time
-between the samples of its two waypoints. ``sim.deposition.deposit(..., segment_speed=...)``
+between the samples of its two waypoints; and how that time compares with the planner's own
+target, the toolpath speed varying linearly along the segment (``target_duration``: on a long
+segment between a slow and a fast waypoint that is longer than L over the mean speed, and the
+arm is not slowed for taking it). ``sim.deposition.deposit(..., segment_speed=...)``
 prints with it (``mesp inspect DIR --as-planned``).
 """
 
@@ -29,14 +32,18 @@ class PlannedSpeeds(NamedTuple):
     """Per toolpath segment i -> i + 1 (N - 1 of them, in toolpath order).
 
     speed: (N - 1,) float64, mm/s, segment length / time the trajectory takes for it.
-    ratio: (N - 1,) float64, speed over the toolpath's (the mean of its two waypoints'
-        speeds, as ``sim.deposition`` uses it); 1 for zero-length segments.
+    ratio: (N - 1,) float64, target_duration / duration: 1 where the arm keeps the
+        toolpath's speed, below where it slows down; 1 for zero-length segments.
     duration: (N - 1,) float64, s, the time between the two waypoints' samples.
+    target_duration: (N - 1,) float64, s, the time at the toolpath's speed, varying linearly
+        along the segment from one waypoint's to the next's (the planner's target):
+        L ln(v1 / v0) / (v1 - v0), L / v0 where they are equal.
     """
 
     speed: NDArray[np.float64]
     ratio: NDArray[np.float64]
     duration: NDArray[np.float64]
+    target_duration: NDArray[np.float64]
 
 
 def segment_speeds(toolpath: Toolpath, trajectory: Trajectory) -> PlannedSpeeds:
@@ -56,19 +63,27 @@ def segment_speeds(toolpath: Toolpath, trajectory: Trajectory) -> PlannedSpeeds:
     t = np.asarray(trajectory.t, dtype=np.float64)[rows]
     duration = np.diff(t)
     length = np.linalg.norm(np.diff(toolpath.position, axis=0), axis=1)
-    target = 0.5 * (toolpath.speed[:-1] + toolpath.speed[1:])
-    moving = length > 0.0
+    v0, v1 = toolpath.speed[:-1], toolpath.speed[1:]
+    moving = (length > 0.0) & (v0 > 0) & (v1 > 0)
+    # time at a speed linear in arc length: integral of ds / v = L ln(v1 / v0) / (v1 - v0)
+    a, b = np.maximum(v0, 1e-12), np.maximum(v1, 1e-12)
+    close = np.abs(b - a) <= 1e-9 * np.maximum(a, b)
+    per_mm = np.where(close, 2.0 / (a + b),
+                      np.log(b / a) / np.where(close, 1.0, b - a))
+    target_duration = np.where(moving, length * per_mm, 0.0)
     # t increases strictly (Trajectory checks it), so every duration is positive
-    speed = np.where(moving, length / np.maximum(duration, 1e-12), target)
-    ratio = np.where(moving & (target > 0), speed / np.maximum(target, 1e-12), 1.0)
-    return PlannedSpeeds(speed=speed, ratio=ratio, duration=duration)
+    speed = np.where(length > 0.0, length / np.maximum(duration, 1e-12), 0.5 * (v0 + v1))
+    ratio = np.where(moving, target_duration / np.maximum(duration, 1e-12), 1.0)
+    return PlannedSpeeds(speed=speed, ratio=ratio, duration=duration,
+                         target_duration=target_duration)
 
 
 class Slowdown(NamedTuple):
     """The extruding segments of a toolpath as a trajectory moves them (print order).
 
-    layer: (S,) int32; length: (S,) float64, mm; ratio: (S,) float64, planned over toolpath
-    speed; extra_mm3: (S,) float64, ink deposited beyond the toolpath's, C * dt - C * L / v.
+    layer: (S,) int32; length: (S,) float64, mm; ratio: (S,) float64,
+    ``PlannedSpeeds.ratio``; extra_mm3: (S,) float64, ink the extruder lays while the arm
+    runs behind the planner's target, C * (dt - target_duration).
     """
 
     layer: NDArray[np.int32]
@@ -91,5 +106,5 @@ def slowdown(toolpath: Toolpath, planned: PlannedSpeeds, morphology: Morphology)
     speed and the constant-rate extruder change what the toolpath asked for."""
     seg = extrusion_segments(toolpath, morphology)
     i = seg.waypoint
-    return Slowdown(layer=seg.layer, length=seg.length, ratio=planned.ratio[i],
-                    extra_mm3=morphology.rate_mm3_s * planned.duration[i] - seg.volume)
+    extra = morphology.rate_mm3_s * (planned.duration[i] - planned.target_duration[i])
+    return Slowdown(layer=seg.layer, length=seg.length, ratio=planned.ratio[i], extra_mm3=extra)

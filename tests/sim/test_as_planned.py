@@ -75,6 +75,28 @@ def test_a_slowed_segment_deposits_the_ink_of_its_time() -> None:
     assert abs(printed.volume_error) < 1e-3
 
 
+def test_speed_changing_along_a_segment_is_not_a_slowdown() -> None:
+    # 5 -> 15 mm/s over a 12 mm segment, moved exactly as the planner targets it (speed
+    # linear in arc length): 12 ln 3 / 10 = 1.32 s, longer than L over the mean speed
+    # (1.2 s), yet nothing is slowed and no extra ink is laid
+    tp = _line_toolpath(n=3, step=12.0)
+    tp = Toolpath(**{**{k: getattr(tp, k) for k in ("position", "normal", "layer", "path",
+                                                      "height", "width", "extrude", "pattern")},
+                     "speed": np.array([5.0, 15.0, 15.0])})
+    t = np.array([0.0, 12.0 * np.log(3.0) / 10.0, 12.0 * np.log(3.0) / 10.0 + 0.8])
+    m = len(t)
+    trajectory = Trajectory(t=t, q=np.zeros((m, 6)), qd=np.zeros((m, 6)), tcp=np.zeros((m, 3)),
+                            waypoint=np.arange(m, dtype=np.int32), alpha=np.full(m, 90.0),
+                            extrude=np.ones(m, bool), base_T=np.eye(4), tool_T=np.eye(4),
+                            model_T=np.eye(4))
+    planned = segment_speeds(tp, trajectory)
+    assert planned.target_duration == pytest.approx([12.0 * np.log(3.0) / 10.0, 0.8])
+    assert planned.ratio == pytest.approx([1.0, 1.0])
+    summary = slowdown(tp, planned, EllipseMorphology()).summary()
+    assert summary["slowed_length_fraction"] == 0.0
+    assert summary["extra_ink_mm3"] == pytest.approx(0.0, abs=1e-9)
+
+
 def test_a_trajectory_of_another_toolpath_is_refused() -> None:
     tp = _line_toolpath()
     other = _trajectory(_line_toolpath(n=15), {})
