@@ -132,6 +132,7 @@ def run(args: argparse.Namespace) -> int:
         with timer.stage("flush"):
             toolpath, flush = _flush(job, toolpath, morphology)
     planned = _planned_speeds(job, toolpath) if args.as_planned else None
+    slowed = None
     result = _simulate("multi-axis", toolpath, morphology, vertices, faces, config, timer)
     section: dict[str, Any] = {**result["summary"], "voxel_mm": config.voxel_mm,
                                "profile": profile_name}
@@ -140,8 +141,8 @@ def run(args: argparse.Namespace) -> int:
 
         as_planned = _simulate("as planned", toolpath, morphology, vertices, faces, config,
                                timer, planned.speed)
-        section["as_planned"] = {**as_planned["summary"],
-                                 **slowdown(toolpath, planned, morphology).summary()}
+        slowed = slowdown(toolpath, planned, morphology)
+        section["as_planned"] = {**as_planned["summary"], **slowed.summary()}
     if flush is not None:
         section["flush"] = flush
     base: dict[str, Any] | None = None
@@ -178,8 +179,8 @@ def run(args: argparse.Namespace) -> int:
     if not args.no_figures:
         with timer.stage("figures"):
             section["figures"] = _figures(job, result, base)
-            if planned is not None:
-                section["figures"].append(_slowdown_figure(job, toolpath, planned, morphology))
+            if slowed is not None:
+                section["figures"].append(_slowdown_figure(job, slowed))
     section["timing_s"] = {k: round(v, 3) for k, v in timer.seconds.items()}
     update_report(job, {"inspect": section})
     columns = [("multi-axis", result["summary"])]
@@ -363,12 +364,12 @@ def _figures(job: Path, result: dict[str, Any], base: dict[str, Any] | None) -> 
     return [p.name for p in files]
 
 
-def _slowdown_figure(job: Path, toolpath: Any, planned: Any, morphology: Any) -> str:
-    """inspect_as_planned.png: per layer, the slowed share of the path and its extra ink."""
-    from sim.as_planned import SLOWED, slowdown
+def _slowdown_figure(job: Path, slow: Any) -> str:
+    """inspect_as_planned.png: per layer, the slowed share of the path and its extra ink
+    (``sim.as_planned.Slowdown``)."""
+    from sim.as_planned import SLOWED
     from sim.inspect_figures import slowdown_plot
 
-    slow = slowdown(toolpath, planned, morphology)
     return slowdown_plot(job / "inspect_as_planned.png", slow.layer, slow.length, slow.ratio,
                          slow.extra_mm3, SLOWED).name
 
