@@ -310,6 +310,7 @@ class _Surface:
         self._smoother: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
         self._face_area: NDArray[np.float64] | None = None
         self._fitted: tuple[float, SurfaceLines] | None = None
+        self._pitch: tuple[float, tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None
         # fitted contours leave holes here (band_fit_covers): eq. 9 lines fill them
         self.fill_holes = False
 
@@ -362,10 +363,25 @@ class _Surface:
         sides = self.sides()
         if sides is None:
             raise ValueError("fitted contours need a band (two or more boundary loops)")
-        smooth = self.smoother(PITCH_SMOOTHING * spacing) if PITCH_SMOOTHING > 0 else None
-        lines = two_sided_contour_lines(self.vertices, self.faces, *sides, spacing, smooth)
+        lines = two_sided_contour_lines(self.vertices, self.faces, *sides, spacing,
+                                        pitch_fit=self.band_pitch(spacing))
         self._fitted = (spacing, lines)
         return lines
+
+    def band_pitch(self, spacing: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """``contours.band_pitch`` of this band at ``spacing``, blended over PITCH_SMOOTHING
+        spacings (the last one kept: the lines and their widths both need it)."""
+        if self._pitch is not None and self._pitch[0] == spacing:
+            return self._pitch[1]
+        from slicer.toolpath.contours import band_pitch
+
+        sides = self.sides()
+        if sides is None:
+            raise ValueError("a band pitch needs a band (two or more boundary loops)")
+        smooth = self.smoother(PITCH_SMOOTHING * spacing) if PITCH_SMOOTHING > 0 else None
+        pitch_fit = band_pitch(*sides, spacing, smooth)
+        self._pitch = (spacing, pitch_fit)
+        return pitch_fit
 
     def width_scale(self, pattern: int, spacing: float) -> NDArray[np.float64] | None:
         """(n,) float64, the band's local pitch over ``spacing`` (within
@@ -381,10 +397,7 @@ class _Surface:
         sides = self.sides() if self.fit_bands and pattern == PATTERN_CONTOUR else None
         if sides is None or self.fill_holes:
             return None
-        from slicer.toolpath.contours import band_pitch
-
-        smooth = self.smoother(PITCH_SMOOTHING * spacing) if PITCH_SMOOTHING > 0 else None
-        pitch, _ = band_pitch(*sides, spacing, smooth)
+        pitch, _ = self.band_pitch(spacing)
         return np.asarray(np.clip(pitch / spacing, *CENTRE_WIDTH_SCALE), dtype=np.float64)
 
     def centre_scale(self, spacing: float) -> NDArray[np.float64] | None:

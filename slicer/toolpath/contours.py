@@ -80,6 +80,7 @@ def two_sided_contour_lines(
     d_inner: NDArray[np.float64], spacing: float,
     smooth: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
     room: float = BRANCH_ROOM,
+    pitch_fit: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
 ) -> SurfaceLines:
     """Contours of a band between two boundaries with a whole number of lines across it.
 
@@ -101,6 +102,8 @@ def two_sided_contour_lines(
     d_outer, d_inner: (n,) float64 mm, distance from the outer loop and from the other
         loops (``geodesic.distance_from``).
     spacing: mm, target pitch (tau * W).
+    pitch_fit: ``band_pitch(d_outer, d_inner, spacing, smooth)`` when the caller has it
+        already (it then replaces ``smooth``).
     """
     check_mesh(vertices, faces)
     f = np.asarray(faces, dtype=np.int64)
@@ -112,7 +115,7 @@ def two_sided_contour_lines(
     if not spacing > 0:
         raise InputError(f"contour spacing must be positive, got {spacing} mm",
                          "check the toolpath width")
-    pitch, fit = band_pitch(da, db, spacing, smooth)
+    pitch, fit = band_pitch(da, db, spacing, smooth) if pitch_fit is None else pitch_fit
     # lines per face from the blended pitch, so a line appears where its room does
     n_face = np.maximum(np.floor((fit / pitch)[f].mean(axis=1) + 0.5 - room), 1
                         ).astype(np.int64)
