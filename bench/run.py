@@ -5,6 +5,7 @@ stage timings are read back from its report.json. Usage:
 
     .venv/bin/python bench/run.py [--examples socket aorta ...] [--until layers|toolpath]
                                   [--repeat N] [--out bench/results] [--cache DIR]
+                                  [--edge-length MM] [--layer-height MM]
 
 Prints one row per example: tets, layers, stage timings (median over repeats), peak memory,
 and under it the toolpath quality of the last run (width error per pattern, volume error,
@@ -39,7 +40,8 @@ PAPER = {
 
 
 def run_one(
-    name: str, until: str, out: Path, edge: float | None, model: Path | None = None
+    name: str, until: str, out: Path, edge: float | None, model: Path | None = None,
+    layer_height: float | None = None,
 ) -> dict[str, Any]:
     """Slice one example in a child process; returns its report plus peak memory (MB)."""
     model = model or next(EXAMPLES.glob(f"{name}.*[lLyY]"))
@@ -50,6 +52,8 @@ def run_one(
         cmd += ["--job", str(job)]
     if edge is not None:
         cmd += ["--edge-length", str(edge)]
+    if layer_height is not None:
+        cmd += ["--layer-height", str(layer_height)]
     before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     start = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
@@ -104,6 +108,8 @@ def main() -> int:
     parser.add_argument("--until", default="toolpath", choices=["tetmesh", "layers", "toolpath"])
     parser.add_argument("--repeat", type=int, default=1)
     parser.add_argument("--edge-length", type=float, default=None)
+    parser.add_argument("--layer-height", type=float, default=None,
+                        help="override the job's layer height, mm (e.g. to reach a layer count)")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     parser.add_argument("--cache", type=Path, default=None, help="tet mesh cache directory")
     args = parser.parse_args()
@@ -121,7 +127,8 @@ def main() -> int:
                 _to_vtu(args.out / name, model)
                 runs.append(first)
         for _ in range(args.repeat):
-            report = run_one(name, args.until, args.out / name, args.edge_length, model)
+            report = run_one(name, args.until, args.out / name, args.edge_length, model,
+                             args.layer_height)
             if runs and "tetrahedralize" in runs[0]["timing_s"]:
                 report["timing_s"]["tetrahedralize"] = runs[0]["timing_s"]["tetrahedralize"]
             runs.append(report)
