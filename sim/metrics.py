@@ -22,7 +22,9 @@ so a surface through voxel centres is not counted as a whole voxel in or out; V_
 * surface error: distance from the printed body's surface (the f = 0.5 iso-surface of the
   printed body above, at sub-voxel precision; what a 3D scanner sees, the walls of a designed
   cavity included, as a CT would) to the model surface:
-  mean, p95, max of its absolute value (mm), computed exactly against the model triangles.
+  mean, p95, max of its absolute value (mm), computed exactly against the model triangles;
+  and split by where the model surface faces (up, side, down: ``SurfaceError.by_facing``),
+  with the signed mean of each, which shows a systematic bulge or shortfall.
 * error map: at points on the model surface, the signed distance to the printed surface
   (> 0 where ink lies outside the model, < 0 where the print falls short).
 * per layer: every voxel is attributed to the layer that brought most of its ink, or, if it has
@@ -31,7 +33,7 @@ so a surface through voxel centres is not counted as a whole voxel in or out; V_
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -43,6 +45,8 @@ from scipy.spatial import cKDTree
 from sim.deposition import Deposit
 from sim.voxels import VoxelGrid, closing_cube, fill_enclosed, iso_points, voxelize_mesh
 from slicer.stages import Toolpath
+
+FACING_DEG = 45.0  # a model face within this of +z is "up", of -z "down", else "side"
 
 
 @dataclass(frozen=True, eq=False)
@@ -56,12 +60,16 @@ class SurfaceError:
         map_points: (Q, 3) float64, mm, sample points on the model surface.
         map_distance: (Q,) float64, mm, signed distance from each to the printed surface
             (> 0 where the print bulges out, < 0 where it falls short).
+        facing_z: (P,) float64, z component of the model's outward unit normal at the model
+            point closest to each printed point (+1 on a top face, -1 on a bottom face; the
+            model frame's z is up in the tank). Empty when not computed.
     """
 
     points: NDArray[np.float64]
     distance: NDArray[np.float64]
     map_points: NDArray[np.float64]
     map_distance: NDArray[np.float64]
+    facing_z: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
 
     def stats(self) -> dict[str, float]:
         """mean, p95, max of |distance| and the signed mean (mm)."""
@@ -70,6 +78,32 @@ class SurfaceError:
             return {"mean": 0.0, "p95": 0.0, "max": 0.0, "signed_mean": 0.0}
         return {"mean": float(a.mean()), "p95": float(np.percentile(a, 95)),
                 "max": float(a.max()), "signed_mean": float(self.distance.mean())}
+
+    def by_facing(self) -> dict[str, dict[str, float]]:
+        """The error split by where the model surface faces: ``up`` (normal within
+        FACING_DEG of +z), ``down`` (of -z) and ``side`` (the rest). Per class: ``share`` of
+        the printed surface points, ``mean`` |distance| and ``signed_mean`` (mm, > 0: the
+        print bulges out there), and ``contribution`` to the overall mean (mm; the three add
+        up to it). A systematic bias shows here that the overall mean averages away: ink
+        displaced from where round filaments cannot reach (bottom grooves, edges) piling up
+        on the top faces."""
+        if self.facing_z.size != self.distance.size or self.distance.size == 0:
+            return {}
+        c = float(np.cos(np.radians(FACING_DEG)))
+        classes = {"up": self.facing_z > c, "side": np.abs(self.facing_z) <= c,
+                   "down": self.facing_z < -c}
+        n = self.distance.size
+        out: dict[str, dict[str, float]] = {}
+        for name, sel in classes.items():
+            d = self.distance[sel]
+            if d.size == 0:
+                out[name] = {"share": 0.0, "mean": 0.0, "signed_mean": 0.0,
+                             "contribution": 0.0}
+                continue
+            out[name] = {"share": d.size / n, "mean": float(np.abs(d).mean()),
+                         "signed_mean": float(d.mean()),
+                         "contribution": float(np.abs(d).sum() / n)}
+        return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -139,6 +173,7 @@ class Quality:
             "over_deposition": self.over_deposition,
             "under_deposition": self.under_deposition,
             "surface_error_mm": self.surface.stats(),
+            "surface_error_by_facing": self.surface.by_facing(),
             "model_volume_mm3": self.model_mm3,
             "deposited_volume_mm3": self.deposited_mm3,
         }
@@ -230,7 +265,15 @@ def _interior(inside: NDArray[np.bool_], depth: int) -> NDArray[np.bool_]:
 
 
 def _signed_distance(points: NDArray[np.float64], mesh: trimesh.Trimesh) -> NDArray[np.float64]:
-    """(P,) float64, mm, signed distance of points to the mesh, > 0 outside.
+    """(P,) float64, mm, signed distance of points to the mesh, > 0 outside
+    (``_signed_distance_faces`` without the faces)."""
+    return _signed_distance_faces(points, mesh)[0]
+
+
+def _signed_distance_faces(points: NDArray[np.float64], mesh: trimesh.Trimesh
+                           ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """(P,) float64, mm, signed distance of points to the mesh, > 0 outside, and (P,) int64,
+    the face holding each point's closest mesh point.
 
     The sign comes from the closest point's angle-weighted pseudonormal on a closed,
     consistently wound mesh (every model that passed the slicer's checks): the same signs as
@@ -238,24 +281,26 @@ def _signed_distance(points: NDArray[np.float64], mesh: trimesh.Trimesh) -> NDAr
     otherwise from the winding number.
     """
     if len(points) == 0:
-        return np.zeros(0)
+        return np.zeros(0), np.zeros(0, dtype=np.int64)
     import igl
 
     closed = bool(mesh.is_watertight and mesh.is_winding_consistent)
     sign = igl.SIGNED_DISTANCE_TYPE_PSEUDONORMAL if closed else (
         igl.SIGNED_DISTANCE_TYPE_WINDING_NUMBER)
-    s, _, _ = igl.signed_distance(np.ascontiguousarray(points, dtype=np.float64),
-                                  np.ascontiguousarray(mesh.vertices, dtype=np.float64),
-                                  np.ascontiguousarray(mesh.faces, dtype=np.int64),
-                                  sign_type=sign)[:3]
-    return np.asarray(s, dtype=np.float64)
+    s, face, _ = igl.signed_distance(np.ascontiguousarray(points, dtype=np.float64),
+                                     np.ascontiguousarray(mesh.vertices, dtype=np.float64),
+                                     np.ascontiguousarray(mesh.faces, dtype=np.int64),
+                                     sign_type=sign)[:3]
+    return np.asarray(s, dtype=np.float64), np.asarray(face, dtype=np.int64).reshape(-1)
 
 
 def _surface_error(body_fill: NDArray[np.floating], deposit: Deposit, mesh: trimesh.Trimesh,
                    samples: int, seed: int) -> SurfaceError:
     grid = deposit.grid
     pts = iso_points(body_fill, grid, 0.5)
-    dist = _signed_distance(pts, mesh)
+    dist, face = _signed_distance_faces(pts, mesh)
+    facing_z = np.asarray(mesh.face_normals, dtype=np.float64)[face, 2] if len(face) else (
+        np.zeros(0))
     rng = np.random.default_rng(seed)
     mpts, _ = trimesh.sample.sample_surface(mesh, samples, seed=int(rng.integers(1 << 31)))
     mpts = np.asarray(mpts, dtype=np.float64)
@@ -268,7 +313,8 @@ def _surface_error(body_fill: NDArray[np.floating], deposit: Deposit, mesh: trim
         mdist = np.where(covered, near, -near)
     else:
         mdist = np.full(len(mpts), -np.inf)
-    return SurfaceError(points=pts, distance=dist, map_points=mpts, map_distance=mdist)
+    return SurfaceError(points=pts, distance=dist, map_points=mpts, map_distance=mdist,
+                        facing_z=facing_z)
 
 
 def _per_layer(deposit: Deposit, m: NDArray[np.float32], shared: NDArray[np.float32],

@@ -391,6 +391,12 @@ def _comparison(main: dict[str, Any], base: dict[str, Any]) -> dict[str, Any]:
     }
 
 
+def _facing(summary: dict[str, Any], facing: str) -> float:
+    """Signed mean surface error on the model faces facing ``facing`` (nan if none)."""
+    part = summary.get("surface_error_by_facing", {}).get(facing)
+    return float(part["signed_mean"]) if part and part["share"] > 0 else float("nan")
+
+
 def _table(columns: list[tuple[str, dict[str, Any]]]) -> str:
     """Side-by-side table (one column per simulated print), with the paper's numbers."""
     rows = [
@@ -402,6 +408,10 @@ def _table(columns: list[tuple[str, dict[str, Any]]]) -> str:
         ("surface error mean mm", lambda s: s["surface_error_mm"]["mean"], "0.20 (planar 0.49)"),
         ("surface error p95 mm", lambda s: s["surface_error_mm"]["p95"], "-"),
         ("surface error max mm", lambda s: s["surface_error_mm"]["max"], "< 1.5"),
+        # signed: > 0 the print bulges out of faces facing that way, < 0 it falls short
+        ("  signed, up faces mm", lambda s: _facing(s, "up"), "-"),
+        ("  signed, side faces mm", lambda s: _facing(s, "side"), "-"),
+        ("  signed, down faces mm", lambda s: _facing(s, "down"), "-"),
     ]
     head = f"{'':24}" + "".join(f"{label:>16}" for label, _ in columns)
     lines = [head + f"   {'paper':<20}"]

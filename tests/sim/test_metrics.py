@@ -97,6 +97,25 @@ def test_shifted_print_has_matching_over_and_under_deposition() -> None:
     assert np.median(q.surface.map_distance[near]) == pytest.approx(-0.5, abs=0.1)
 
 
+def test_error_by_facing_finds_a_raised_top_and_a_short_bottom() -> None:
+    grid = VoxelGrid(origin=(-2.0, -2.0, -2.0), voxel=0.25, shape=(48, 48, 52))
+    box = _box((0.0, 0.0, 0.0), (8.0, 8.0, 8.0))
+    lifted = _box((0.0, 0.0, 0.5), (8.0, 8.0, 8.5))  # the whole print sits 0.5 mm too high
+    q = inspect_deposit(_deposit_of(model_fraction(lifted, grid), grid), box.vertices,
+                        box.faces)
+    facing = q.surface.by_facing()
+    assert facing["up"]["signed_mean"] == pytest.approx(0.5, abs=0.05)
+    assert facing["down"]["signed_mean"] == pytest.approx(-0.5, abs=0.05)
+    assert abs(facing["side"]["signed_mean"]) < 0.05
+    # a cube's six faces: a sixth up, a sixth down (edges go to the nearer face)
+    assert facing["up"]["share"] == pytest.approx(1 / 6, abs=0.03)
+    assert sum(f["share"] for f in facing.values()) == pytest.approx(1.0)
+    # the contributions add up to the overall mean
+    total = sum(f["contribution"] for f in facing.values())
+    assert total == pytest.approx(q.surface.stats()["mean"], rel=1e-9)
+    assert q.summary()["surface_error_by_facing"] == facing
+
+
 def test_interior_infill_ignores_the_skin_but_not_a_core_pore() -> None:
     # an 8 mm box printed 0.5 mm short on the +x face: the infill ratio loses 1/16, the
     # interior (1 mm below the surface) is whole; a 2 mm pore in the core shows in both
