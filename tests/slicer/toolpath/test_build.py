@@ -252,15 +252,36 @@ def test_closed_component_is_skipped_with_reason() -> None:
     assert res.report["extrusion_starts"]["total"] >= 1
 
 
-def test_heights_outside_profile_are_clamped() -> None:
+def test_heights_below_profile_are_raised() -> None:
     layers = disc_stack(1, radius=6.0, base_h=0.6, slope=0.55)  # H from 0.05 to 1.15 mm
     res = compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False, workers=1)
     tp = res.toolpath
-    lo, hi = PROFILE.layer_height_range
-    assert np.all((tp.height >= lo - 1e-12) & (tp.height <= hi + 1e-12))
+    lo, _ = PROFILE.layer_height_range
+    assert np.all(tp.height >= lo - 1e-12)
     assert np.all(np.isfinite(tp.width)) and tp.width.max() < 10.0
     assert np.allclose(tp.width, PROFILE.rate_mm3_s / (tp.height * tp.speed))
     assert res.report["height_out_of_profile_fraction"] > 0
+
+
+def test_heights_above_profile_keep_their_slab_spacing() -> None:
+    """A slab thicker than the profile covers: the speed saturates at the slowest, H stays
+    as sliced and W = C / (H v) is the spacing at which that filament fills the slab, so
+    the contours lie about W apart (clamping H to the table made W twice too wide and the
+    volume match packed the lines at half of it)."""
+    h = 3.0  # profile: H up to 1.65 mm
+    layers = disc_stack(1, radius=12.0, base_h=h, slope=0.0)
+    res = compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False, workers=1)
+    tp = res.toolpath
+    sel = tp.extrude
+    v_min = float(PROFILE.speed[0])
+    assert np.allclose(tp.height[sel], h, rtol=1e-3)
+    assert np.allclose(tp.speed[sel], v_min, rtol=1e-3)
+    assert np.allclose(tp.width, PROFILE.rate_mm3_s / (tp.height * tp.speed))
+    w = PROFILE.rate_mm3_s / (h * v_min)
+    assert np.median(tp.width[sel]) == pytest.approx(w, rel=0.05)
+    assert res.report["width_error"]["contour"]["p50"] < 0.05
+    assert abs(res.report["layer_volume_error"]) < 0.02
+    assert res.report["height_out_of_profile_fraction"] == pytest.approx(1.0)
 
 
 def test_stripes_stop_half_a_width_inside() -> None:
