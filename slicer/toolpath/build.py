@@ -111,6 +111,7 @@ FLOW_FIT_ABOVE = 0.02  # ... where the spacing misses the component's volume by 
 TINY_LOOP = 2.0  # closed lines shorter than this x W are dropped (a blob, not a loop)
 NARROW_STRIPES = 2.0  # a stripe-layer component narrower than this x W ...
 NARROW_SHARE = 0.5  # ... over at least this share of its area gets contours
+WALL_SHARE = 0.15  # ... over at least this share: its walls get their centre line
 UNCOVERED = 0.8  # band fitting fails where an area is farther than this x spacing from lines
 UNCOVERED_SHARE = 0.02  # ... more than this share of the component (eq. 9 lines fill them)
 LONE_LINE = 2.0  # no other line within this x W: the line fills its band alone (_measure)
@@ -317,6 +318,10 @@ class _Surface:
         self._pitch: tuple[float, tuple[NDArray[np.float64], NDArray[np.float64]]] | None = None
         # fitted contours leave holes here (band_fit_covers): eq. 9 lines fill them
         self.fill_holes = False
+        # stripes only where the component is wider than 2 x this, its narrow walls get
+        # their centre line (``narrow_walls``); 0: stripes everywhere
+        self.wall_half_width = 0.0
+        self._reach: tuple[float, NDArray[np.float64]] | None = None
 
     def sides(self) -> tuple[NDArray[np.float64], NDArray[np.float64]] | None:
         """(n,) distances from the longest boundary loop and from all the others; None for
@@ -339,22 +344,38 @@ class _Surface:
 
     def mostly_narrow(self, half_width: float, share: float) -> bool:
         """Whether the band is narrower than 2 x half_width on at least ``share`` of the
-        area: farther than half_width from every point at least half_width from the
-        boundary."""
+        area (``narrow_share``)."""
+        return self.narrow_share(half_width, share) >= share
+
+    def narrow_share(self, half_width: float, at_least: float = 0.0) -> float:
+        """Share of the area where the band is narrower than 2 x half_width: farther than
+        half_width from every point at least half_width from the boundary (0 when less
+        than ``at_least`` of the area lies within half_width of the boundary, without
+        measuring further)."""
         if len(self.faces) == 0:
-            return False
+            return 0.0
         total = max(float(self.face_area.sum()), tol.zero)
         near = self.distance[self.faces].mean(axis=1) < half_width
-        if float(self.face_area[near].sum()) < share * total:
-            return False  # narrow areas lie within half_width of the boundary: too few
-        wide = np.flatnonzero(self.distance >= half_width)
-        if len(wide) == 0:
-            return True
-        from slicer.toolpath.geodesic import distance_from
+        near_share = float(self.face_area[near].sum()) / total
+        if near_share < at_least:
+            return near_share  # narrow areas lie within half_width of the boundary: too few
+        narrow = self.reach(half_width)[self.faces].mean(axis=1) > half_width
+        return float(self.face_area[narrow].sum()) / total
 
-        reach = distance_from(self.vertices, self.faces, wide, backend=self.backend)
-        narrow = reach[self.faces].mean(axis=1) > half_width
-        return float(self.face_area[narrow].sum()) >= share * total
+    def reach(self, half_width: float) -> NDArray[np.float64]:
+        """(n,) float64, distance (surface units) from the points at least half_width from
+        the boundary (inf without any): beyond half_width the band is narrower than
+        2 x half_width."""
+        if self._reach is None or self._reach[0] != half_width:
+            wide = np.flatnonzero(self.distance >= half_width)
+            if len(wide) == 0:
+                reach = np.full(len(self.vertices), np.inf)
+            else:
+                from slicer.toolpath.geodesic import distance_from
+
+                reach = distance_from(self.vertices, self.faces, wide, backend=self.backend)
+            self._reach = (half_width, reach)
+        return self._reach[1]
 
     def fitted_contours(self, spacing: float) -> SurfaceLines:
         """Contours fitted to the band (``contours.two_sided_contour_lines``) at ``spacing``;
@@ -398,6 +419,13 @@ class _Surface:
         stripes: their local spacing 2 pi / |grad psi| is off next to the ends
         trim_converging cuts back (tried: the membrane's and the aorta's prints kept more
         gel; README, session 11)."""
+        if pattern == PATTERN_STRIPE and self.wall_half_width > 0.0:
+            # the walls' centre lines as wide as the wall, the stripes at W
+            centre = self.centre_scale(spacing)
+            if centre is None:
+                return None
+            wall = self.reach(self.wall_half_width) > self.wall_half_width
+            return np.where(wall, centre, 1.0)
         sides = self.sides() if self.fit_bands and pattern == PATTERN_CONTOUR else None
         if sides is None or self.fill_holes:
             return None
@@ -505,6 +533,22 @@ class _Surface:
         u = d_out / np.maximum(d_out + d_in, tol.zero)
         return iso_lines(self.vertices, self.faces, u, np.array([0.5]))
 
+    def narrow_walls(self, stripes: SurfaceLines) -> SurfaceLines:
+        """``stripes`` kept where the component is at least 2 x wall_half_width wide, and
+        the centre line (``centre_lines``) along its narrower walls: across a wall about one
+        width wide stripes are stubs joined by U-turn connectors, which then lay half the
+        ink, and the volume match spreads the stripes of the wide part apart to make up
+        for it (the aorta's plaque junction: two tube walls and the bridge between them)."""
+        from slicer.toolpath.lines import merge_lines
+        from slicer.toolpath.perimeter import clip_lines
+
+        hw = self.wall_half_width
+        reach = self.reach(hw)
+        wide = clip_lines(stripes, self.vertices, self.faces, -reach, -hw)
+        walls = clip_lines(self.centre_lines(), self.vertices, self.faces, reach, hw)
+        ident = np.arange(len(self.faces))
+        return merge_lines([walls, wide], [ident, ident])
+
     def lines(self, pattern: int, spacing: float, poisson: bool = False) -> SurfaceLines:
         """Contours or stripes at ``spacing`` on this surface (its units).
 
@@ -536,6 +580,8 @@ class _Surface:
 
         fn = poisson_stripe_lines if poisson else stripe_lines
         stripes = fn(self.vertices, self.faces, self.direction, spacing)
+        if self.wall_half_width > 0.0:
+            return self.narrow_walls(stripes)
         from slicer.toolpath.perimeter import PERIMETER_MIN_DISTANCE
 
         if not self.perimeter or self.max_distance < PERIMETER_MIN_DISTANCE * spacing:
@@ -869,6 +915,10 @@ def _component_toolpath_unsafe(
         # band (a thin wall, a tube's shell, with or without a wider spot) is printed as on
         # a contour layer; there is no across-the-band direction to stagger anyway.
         used, fallback = PATTERN_CONTOUR, "contour"
+    # partly such walls (a junction between two tubes): also tried with stripes on the wide
+    # part only and the walls' centre lines (``_Surface.narrow_walls``)
+    walls = (used == PATTERN_STRIPE and cfg.fit_bands and surf.sides() is not None
+             and surf.narrow_share(0.5 * NARROW_STRIPES * comp.w_mean) >= WALL_SHARE)
     # contours with fit_bands: a band narrower than 1.5 W everywhere holds round(b / W) = 1
     # line, the centre line, whose width is then fitted to the band (centre_match)
     thin = 0.5 * THIN_BAND_FIT if cfg.fit_bands and used == PATTERN_CONTOUR else THIN_BAND
@@ -890,6 +940,17 @@ def _component_toolpath_unsafe(
             alt = run_joined(plain, used)
             if abs(alt.rel_error) <= FLOW_FIT_ABOVE and p90(alt) < p90(match):
                 surf, match, fallback = plain, alt, "no-band"
+        if walls:
+            # kept where the lines keep their spacing better (the aorta's plaque junction:
+            # stripe p90 34 -> 21 %; a plate with two holes, whose junction is short stubs
+            # either way, keeps the stripes everywhere)
+            surf.wall_half_width = 0.5 * NARROW_STRIPES * comp.w_mean
+            alt = run_joined(surf, used)
+            if (abs(alt.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
+                    and p90(alt) < p90(match)):
+                match, fallback = alt, "walls"
+            else:
+                surf.wall_half_width = 0.0
     if abs(match.rel_error) > THIN_SHORTFALL and fallback != "centre-line":
         # A band about one width wide: stripes across it vanish once their ends are cut
         # back by W / 2, contours come out as a doubled loop. Try the other pattern and a
@@ -928,6 +989,7 @@ def _component_toolpath_unsafe(
                               cfg.boundary_distance)
             if used == PATTERN_CONTOUR:
                 direct.fill_band_fit_holes(comp.w_mean)
+            direct.wall_half_width = surf.wall_half_width
             b = run(direct, used, match.tau).result
         # the baselines' lines would print at the same flow as the component's
         err_undeformed = measure(b.lines, built.flow, b.scale)[0]

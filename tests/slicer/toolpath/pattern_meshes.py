@@ -1,5 +1,5 @@
-"""Tiny layer meshes for the toolpath pattern tests: discs, annuli and a plate with two
-holes, flat or lifted."""
+"""Tiny layer meshes for the toolpath pattern tests: discs, annuli, a plate with two
+holes and two tube walls joined by a bridge, flat or lifted."""
 
 from __future__ import annotations
 
@@ -122,3 +122,36 @@ def plate_with_holes(width: float = 44.0, height: float = 20.0, radius: float = 
     for cx in (-centre_x, centre_x):
         solid &= np.hypot(centre[:, 0] - cx, centre[:, 1]) > radius
     return flat_mesh(p, tri[solid])
+
+
+def rings_with_bridge(ring_radius: float = 14.0, wall: float = 2.4, centre_x: float = 26.0,
+                      bridge: float = 14.0, h: float = 0.5
+                      ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
+    """Two tubes' walls joined by a solid bridge, flat in z = 0 (the aorta's plaque junction
+    in miniature): rings of outer radius ``ring_radius`` and ``wall`` thick at
+    x = +-centre_x, and a rectangle ``bridge`` tall spanning between the rings. Edge length
+    about h; faces normal +z."""
+    inner = ring_radius - wall
+    xs = np.arange(-centre_x - ring_radius, centre_x + ring_radius + 1e-9, h)
+    ys = np.arange(-ring_radius, ring_radius + 1e-9, h)
+    gx, gy = np.meshgrid(xs, ys)
+    p = np.column_stack([gx.ravel(), gy.ravel()])
+    p = p + 0.1 * h * np.random.default_rng(1).uniform(-1, 1, p.shape)
+    circles = []
+    for cx in (-centre_x, centre_x):
+        for rr in (ring_radius, inner):
+            a = np.linspace(0, 2 * np.pi, int(2 * np.pi * rr / h), endpoint=False)
+            circles.append(np.column_stack([cx + rr * np.cos(a), rr * np.sin(a)]))
+
+    def solid(q: NDArray[np.float64]) -> NDArray[np.bool_]:
+        d = [np.hypot(q[:, 0] - cx, q[:, 1]) for cx in (-centre_x, centre_x)]
+        in_ring = (d[0] < ring_radius) | (d[1] < ring_radius)
+        in_bridge = (np.abs(q[:, 0]) < centre_x) & (np.abs(q[:, 1]) < 0.5 * bridge)
+        return (in_ring | in_bridge) & (d[0] > inner) & (d[1] > inner)
+
+    margin = solid(p) & np.all([np.abs(np.hypot(p[:, 0] - cx, p[:, 1]) - rr) > 0.3 * h
+                                for cx in (-centre_x, centre_x)
+                                for rr in (ring_radius, inner)], axis=0)
+    p = np.concatenate([p[margin], *circles])
+    tri = Delaunay(p).simplices
+    return flat_mesh(p, tri[solid(p[tri].mean(axis=1))])
