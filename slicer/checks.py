@@ -33,8 +33,9 @@ def job_notes(report: Mapping[str, Any]) -> list[str]:
             f"toolpath: {100 * share:.1f}% of the layer vertices have a layer height outside "
             f"the extrusion profile's {lo_hi[0]:.2f}-{lo_hi[1]:.2f} mm (layers span "
             f"{h.get('min', float('nan')):.2f}-{h.get('max', float('nan')):.2f} mm): their "
-            "filaments are those of the nearest height it covers and will not fill their "
-            "slab as planned; fix: a layer height or critical surfaces that keep H in "
+            "filaments are those of the nearest height it covers (spaced to give the slab "
+            "its volume, but thicker or thinner than it, so the layers overlap less or "
+            "more than beta says); fix: a layer height or critical surfaces that keep H in "
             "range (e.g. a position condition such as bottom:30@z<1), or a profile measured "
             "over a wider range (mesp calibrate)")
     failed = toolpath.get("failed_components", {})
