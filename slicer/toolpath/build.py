@@ -37,7 +37,12 @@ boundary loops), its width scaled to the band's volume by the speed (within
 CENTRE_WIDTH_SCALE and the profile's table: a thin wall gets a thinner, faster line instead of
 a 1.5x overfill); when the volume of the regular pattern stays off by more than
 THIN_SHORTFALL, the other pattern and that centre line are tried and the closest volume wins
-(reported as 'thin_fallback'). A component that cannot be
+(reported as 'thin_fallback'). Two more choices are made by measuring (the p90 of the
+width error of both candidates): a contour component that is no band (the fitted lines
+leave holes) is printed with eq. 9's lines in those holes or with eq. 9's lines alone
+('no-band'); a stripe component that is partly walls narrower than NARROW_STRIPES * W
+(WALL_SHARE of its area or more) with stripes everywhere or with the walls' centre lines
+and stripes on the wide part only ('walls'). A component that cannot be
 processed (no boundary, a solver failure) is skipped with its reason in the report instead
 of stopping the whole job.
 
@@ -349,9 +354,9 @@ class _Surface:
 
     def narrow_share(self, half_width: float, at_least: float = 0.0) -> float:
         """Share of the area where the band is narrower than 2 x half_width: farther than
-        half_width from every point at least half_width from the boundary (0 when less
-        than ``at_least`` of the area lies within half_width of the boundary, without
-        measuring further)."""
+        half_width from every point at least half_width from the boundary. Where less than
+        ``at_least`` of the area lies within half_width of the boundary, that share (an
+        upper bound) without measuring further."""
         if len(self.faces) == 0:
             return 0.0
         total = max(float(self.face_area.sum()), tol.zero)
@@ -917,8 +922,9 @@ def _component_toolpath_unsafe(
         used, fallback = PATTERN_CONTOUR, "contour"
     # partly such walls (a junction between two tubes): also tried with stripes on the wide
     # part only and the walls' centre lines (``_Surface.narrow_walls``)
-    walls = (used == PATTERN_STRIPE and cfg.fit_bands and surf.sides() is not None
-             and surf.narrow_share(0.5 * NARROW_STRIPES * comp.w_mean) >= WALL_SHARE)
+    walls = (used == PATTERN_STRIPE and cfg.fit_bands
+             and surf.narrow_share(0.5 * NARROW_STRIPES * comp.w_mean, WALL_SHARE) >= WALL_SHARE
+             and surf.sides() is not None)
     # contours with fit_bands: a band narrower than 1.5 W everywhere holds round(b / W) = 1
     # line, the centre line, whose width is then fitted to the band (centre_match)
     thin = 0.5 * THIN_BAND_FIT if cfg.fit_bands and used == PATTERN_CONTOUR else THIN_BAND
