@@ -894,8 +894,10 @@ def _component_toolpath_unsafe(
                         comp.normals[lines.face], boundary)
 
     def p90(m: VolumeMatch[_Built]) -> float:
+        """p90 of the measured width error of a candidate (inf where nothing could be
+        measured: such a candidate never wins a comparison)."""
         err = measure(m.result.lines, m.result.flow, m.result.scale)[0]
-        return float(np.percentile(err, 90)) if len(err) else 0.0
+        return float(np.percentile(err, 90)) if len(err) else float("inf")
 
     def run_joined(surface: _Surface, used: int) -> VolumeMatch[_Built]:
         """``run``; where the match fails with the configured joins, also with short ones,
