@@ -82,7 +82,11 @@ def error_map(path: Path, quality: Quality, title: str = "", limit_mm: float | N
     if err.size:
         ax.hist(err, bins=60, color="tab:gray")
     s = quality.surface.stats()
-    ax.set_title(f"|error| mean {s['mean']:.3f}  p95 {s['p95']:.3f}  max {s['max']:.3f} mm")
+    facing = quality.surface.by_facing()
+    signed = "  ".join(f"{name} {part['signed_mean']:+.3f}" for name, part in facing.items()
+                        if part["share"] > 0)
+    ax.set_title(f"|error| mean {s['mean']:.3f}  p95 {s['p95']:.3f}  max {s['max']:.3f} mm"
+                 + (f"\nsigned by facing: {signed} mm" if signed else ""), fontsize=10)
     ax.set_xlabel("distance of printed surface to model (mm)")
     fig.suptitle(title or "surface error on the model (red: ink outside, blue: short)")
     fig.savefig(path, dpi=110)
