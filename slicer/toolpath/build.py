@@ -87,6 +87,7 @@ from slicer.toolpath.mapback import (
     vertex_normals,
 )
 from slicer.toolpath.ordering import line_levels, order_lines
+from slicer.toolpath.peaks import add_distance_peaks
 from slicer.toolpath.resample import (
     drop_short_lines,
     drop_tiny_loops,
@@ -643,16 +644,29 @@ class _Component:
     def __init__(self, layer: LayerMesh, face_ids: NDArray[np.int64], pattern: int,
                  cfg: ToolpathConfig, profile: ExtrusionProfile) -> None:
         used, faces = _compact(layer.vertices, layer.faces[face_ids])
-        self.vertices = layer.vertices[used]
+        vertices = layer.vertices[used]
+        height = np.maximum(layer.height[used], 0.0)
+        direction = layer.direction[used]
+        # a vertex where the boundary distance peaks inside a triangle (a disc's centre):
+        # else the innermost lines stop short of it and leave a pocket of gel (peaks.py)
+        vertices, split, parent, bary = add_distance_peaks(
+            vertices, faces, profile.width(np.maximum(height, profile.layer_height_range[0])))
+        if len(parent):
+            height = np.concatenate([height, interpolate(height, faces, parent, bary)])
+            between = interpolate(direction, faces, parent, bary)
+            direction = np.concatenate([direction, between / np.maximum(
+                np.linalg.norm(between, axis=1, keepdims=True), tol.zero)])
+            faces = split
+        self.vertices = vertices
         self.faces = faces
         # H as sliced (for the required volume) and H as printed: raised to the profile's
         # smallest, because W = C / (H v) diverges as H -> 0 where the speed saturates.
         # Above the table H stays: the speed saturates at the slowest, and W = C / (H v)
         # is the pitch that slab needs from that filament (clamping H there too overstated
         # W, up to 8 mm where a 3 mm slab needs lines 4.4 mm apart)
-        self.height_sliced = np.maximum(layer.height[used], 0.0)
+        self.height_sliced = height
         self.height = np.maximum(self.height_sliced, profile.layer_height_range[0])
-        self.direction = layer.direction[used]
+        self.direction = direction
         self.pattern = pattern
         self.cfg = cfg
         self.profile = profile
