@@ -59,7 +59,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass, field, replace
-from typing import Any, Literal
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -199,7 +199,9 @@ class ComponentResult:
         connector_mm3: deposited volume of the connectors that join lines (included in
             deposited_mm3, so the volume match accounts for it).
         width_error: (k,) float64, |spacing - W| / W at the line points (deformed method),
-            W the width the waypoints print (after ``fit_flow``, if it scaled the speed).
+            W the width the waypoints print (after ``fit_flow``, if it scaled the speed),
+            the mean of the point's and the neighbouring line's (``_measure``).
+        width_error_pointwise: (k,) float64, the same against the point's W alone.
         width_error_nominal: (k,) float64, the same against the profile's W(H).
         width_lone_points: how many of those are on lone lines, measured by their band.
         width_error_undeformed: (k',) float64, same, lines computed on the original layer.
@@ -227,6 +229,7 @@ class ComponentResult:
     width_error_undeformed: NDArray[np.float64]
     width_error_poisson: NDArray[np.float64]
     width_error_nominal: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    width_error_pointwise: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     width_lone_points: int = 0
     timings: dict[str, float] = field(default_factory=dict)
     error: str = ""
@@ -602,30 +605,50 @@ class _Surface:
         return merge_lines([loop, inner], [ident, ident])
 
 
+class _Measured(NamedTuple):
+    """Width error at the line points with a measured spacing (dimensionless)."""
+
+    error: NDArray[np.float64]  # (k,) |spacing - target| / target, target the pair's mean W
+    pointwise: NDArray[np.float64]  # (k,) |spacing - W| / W, W at the point alone
+    lone: int  # how many of the k points are on lone lines, measured by their band
+
+
 def _measure(lines: SurfaceLines, width_pt: NDArray[np.float64],
              normals_pt: NDArray[np.float64],
              boundary: Callable[[], tuple[NDArray[np.float64], NDArray[np.float64]]]
-             ) -> tuple[NDArray[np.float64], int]:
-    """(k,) float64, |spacing - W| / W at the line points with a measured spacing, and how
-    many of them are lone (no other line within LONE_LINE x W).
+             ) -> _Measured:
+    """The width error of ``lines`` printed at ``width_pt`` ((P,) float64 mm).
+
+    Two neighbouring lines tile the layer when they lie (W_a + W_b) / 2 apart, each covering
+    half its own width on either side; that mean, of the width at the point and at its foot
+    on the neighbouring line, is the target of the spacing. Measured against the point's W
+    alone (``pointwise``, the measure before session 13), a layer whose W changes across
+    one spacing is always off: its nearest neighbour lies on the narrower side, half the
+    change away from W (the membrane's dome layers, W 2.5-7 mm: -10 % on every interior
+    ring, however well the lines follow eq. 14).
 
     A lone line fills a band about one width wide by itself (a thin wall, a tube's shell):
     its nearest other line lies across the part, not beside it, so its spacing is the
     band's width there: the distances to the boundary on its two sides (Euclidean: exact
-    on flat layers, and a band that thin is nearly flat across). ``boundary`` gives the
-    (B, 3) mm ends a, b of the original layer's boundary segments (called when needed).
+    on flat layers, and a band that thin is nearly flat across), against its own W.
+    ``boundary`` gives the (B, 3) mm ends a, b of the original layer's boundary segments
+    (called when needed).
     """
-    from slicer.toolpath.width_error import band_width, line_spacing
+    from slicer.toolpath.width_error import band_width, line_neighbours
 
     if len(lines.points) < 2:
-        return np.zeros(0), 0
-    spacing = line_spacing(lines.points, lines.line, normals_pt, closed=lines.closed)
+        return _Measured(np.zeros(0), np.zeros(0), 0)
+    near = line_neighbours(lines.points, lines.line, normals_pt, closed=lines.closed)
+    spacing = near.spacing.copy()
+    target = 0.5 * (width_pt + near.at_foot(width_pt))
     lone = ~np.isfinite(spacing) | (spacing > LONE_LINE * width_pt)
     if lone.any():
         spacing[lone] = band_width(lines.points[lone], *boundary())
-    ok = np.isfinite(spacing) & (width_pt > 0)
-    err = np.abs(spacing[ok] - width_pt[ok]) / width_pt[ok]
-    return err, int(np.count_nonzero(lone & ok))
+        target[lone] = width_pt[lone]
+    ok = np.isfinite(spacing) & (width_pt > 0) & (target > 0)
+    return _Measured(np.abs(spacing[ok] - target[ok]) / target[ok],
+                     np.abs(spacing[ok] - width_pt[ok]) / width_pt[ok],
+                     int(np.count_nonzero(lone & ok)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -900,7 +923,7 @@ def _component_toolpath_unsafe(
         return comp.vertices[edges[:, 0]], comp.vertices[edges[:, 1]]
 
     def measure(lines: SurfaceLines, flow: float = 1.0,
-                scale: NDArray[np.float64] | None = None) -> tuple[NDArray[np.float64], int]:
+                scale: NDArray[np.float64] | None = None) -> _Measured:
         """Width error of ``lines`` against the width they print at ``flow`` (and the
         per-vertex width ``scale``)."""
         h_pt, v_pt, w_pt = comp.values_at(lines.face, lines.bary, scale)
@@ -910,7 +933,7 @@ def _component_toolpath_unsafe(
     def p90(m: VolumeMatch[_Built]) -> float:
         """p90 of the measured width error of a candidate (inf where nothing could be
         measured: such a candidate never wins a comparison)."""
-        err = measure(m.result.lines, m.result.flow, m.result.scale)[0]
+        err = measure(m.result.lines, m.result.flow, m.result.scale).error
         return float(np.percentile(err, 90)) if len(err) else float("inf")
 
     def run_joined(surface: _Surface, used: int) -> VolumeMatch[_Built]:
@@ -997,9 +1020,9 @@ def _component_toolpath_unsafe(
     t0 = time.perf_counter()
     # against the width the waypoints carry (flow-fitted components print wider or
     # narrower lines on purpose), and against the profile's W(H) for comparison
-    err, lone = measure(built.lines, built.flow, built.scale)
-    err_nominal = (err if built.flow == 1.0 and built.scale is None
-                   else measure(built.lines)[0])
+    measured = measure(built.lines, built.flow, built.scale)
+    err_nominal = (measured.error if built.flow == 1.0 and built.scale is None
+                   else measure(built.lines).error)
     err_undeformed = np.zeros(0)
     err_poisson = np.zeros(0)
     if measure_baselines:
@@ -1014,10 +1037,10 @@ def _component_toolpath_unsafe(
             direct.wall_half_width = surf.wall_half_width
             b = run(direct, used, match.tau).result
         # the baselines' lines would print at the same flow as the component's
-        err_undeformed = measure(b.lines, built.flow, b.scale)[0]
+        err_undeformed = measure(b.lines, built.flow, b.scale).error
         if used == PATTERN_STRIPE:
             pb = run(surf, used, match.tau, poisson=True).result
-            err_poisson = measure(pb.lines, built.flow)[0]
+            err_poisson = measure(pb.lines, built.flow).error
     timings["baselines"] = time.perf_counter() - t0
     wp = replace(built.waypoints, pattern=np.full(len(built.waypoints.path), used, np.int8))
     return ComponentResult(
@@ -1032,9 +1055,10 @@ def _component_toolpath_unsafe(
         deform_status=deform_status,
         extrusion_starts=built.linked.extrusion_starts,
         connector_mm3=float(wp.deposited()[built.linked.connector_segments()].sum()),
-        width_error=err,
+        width_error=measured.error,
+        width_error_pointwise=measured.pointwise,
         width_error_nominal=err_nominal,
-        width_lone_points=lone,
+        width_lone_points=measured.lone,
         width_error_undeformed=err_undeformed,
         width_error_poisson=err_poisson,
         timings=timings,
@@ -1271,6 +1295,8 @@ def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile)
             "deformed": np.concatenate([c.width_error for c in sel]) if sel else np.zeros(0),
             "nominal": (np.concatenate([c.width_error_nominal for c in sel])
                         if sel else np.zeros(0)),
+            "pointwise": (np.concatenate([c.width_error_pointwise for c in sel])
+                          if sel else np.zeros(0)),
             "undeformed": (np.concatenate([c.width_error_undeformed for c in sel])
                            if sel else np.zeros(0)),
             "poisson": (np.concatenate([c.width_error_poisson for c in sel])
@@ -1312,6 +1338,9 @@ def _report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile)
         # the same lines against the profile's W(H) rather than the width they print (they
         # differ where fit_flow scaled a component's speed)
         "width_error_nominal": {k: _pct(v["nominal"]) for k, v in errors.items()},
+        # the same lines against the width at the point alone, not the mean of the two
+        # neighbouring lines' (the measure up to session 13)
+        "width_error_pointwise": {k: _pct(v["pointwise"]) for k, v in errors.items()},
         "width_error_undeformed": {k: _pct(v["undeformed"]) for k, v in errors.items()},
         "width_error_poisson_stripe": _pct(errors["stripe"]["poisson"]),
         # share of the measured points on lone lines (no other line within LONE_LINE x W:

@@ -1,4 +1,5 @@
-"""Measured toolpath spacing and the width error |spacing - W| / W (design.md report keys)."""
+"""Measured toolpath spacing and the width error |spacing - W| / W (design.md report keys;
+W the mean of the two neighbouring lines' widths, ``slicer.toolpath.build._measure``)."""
 
 from __future__ import annotations
 
@@ -40,11 +41,42 @@ def _arc_length(points: NDArray[np.float64], line: NDArray[np.int32]
     return s, total[line]
 
 
+class LineNeighbours(NamedTuple):
+    """Each line point's neighbouring line: the distance to it and where it is met.
+
+    spacing: (P,) float64 mm, distance to the neighbouring line, NaN where none was found.
+    near, far: (P,) int64, the neighbour's foot lies on the segment from point ``near`` to
+        point ``far`` (equal where the foot is a point), index into the points.
+    t: (P,) float64 in [0, 1], the foot's position from ``near`` to ``far``.
+    """
+
+    spacing: NDArray[np.float64]
+    near: NDArray[np.int64]
+    far: NDArray[np.int64]
+    t: NDArray[np.float64]
+
+    def at_foot(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        """(P,) ``values`` (one per line point) interpolated at each point's foot on the
+        neighbouring line (the point's own value where it has no neighbour)."""
+        v = np.asarray(values, dtype=np.float64)
+        out = (1.0 - self.t) * v[self.near] + self.t * v[self.far]
+        return np.where(np.isfinite(self.spacing), out, v)
+
+
 def line_spacing(points: NDArray[np.float64], line: NDArray[np.integer],
                  normals: NDArray[np.float64] | None = None, k: int = 24,
                  closed: NDArray[np.bool_] | None = None, max_k: int = 768
                  ) -> NDArray[np.float64]:
-    """(P,) float64 mm, distance from each line point to the neighbouring line.
+    """(P,) float64 mm, distance from each line point to the neighbouring line
+    (``line_neighbours(...).spacing``)."""
+    return line_neighbours(points, line, normals, k, closed, max_k).spacing
+
+
+def line_neighbours(points: NDArray[np.float64], line: NDArray[np.integer],
+                    normals: NDArray[np.float64] | None = None, k: int = 24,
+                    closed: NDArray[np.bool_] | None = None, max_k: int = 768
+                    ) -> LineNeighbours:
+    """Each line point's distance to the neighbouring line, and the foot there.
 
     points: (P, 3) float64 mm, polylines stored consecutively; line: (P,) int polyline id.
     The neighbour is the nearest segment of another line, or of the same line when the two
@@ -62,8 +94,9 @@ def line_spacing(points: NDArray[np.float64], line: NDArray[np.integer],
                          "pass SurfaceLines.points and SurfaceLines.line")
     n_pts = len(p)
     out = np.full(n_pts, np.nan)
+    own = np.arange(n_pts)
     if n_pts < 2:
-        return out
+        return LineNeighbours(out, own, own, np.zeros(n_pts))
     s, total = _arc_length(p, ln.astype(np.int32))
     is_closed = np.zeros(int(ln.max()) + 1, dtype=bool)
     if closed is not None:
@@ -98,22 +131,30 @@ def line_spacing(points: NDArray[np.float64], line: NDArray[np.integer],
     wrap = is_closed[ln]
     prev_i = np.where(j > first[j], j - 1, np.where(wrap[j], last[j], j))
     next_i = np.where(j < last[j], j + 1, np.where(wrap[j], first[j], j))
+    far = j.copy()
+    foot_t = np.zeros(n_pts)
     for nb, valid in ((prev_i, prev_i != j), (next_i, next_i != j)):
         a, b = p[j], p[nb]
         ab = b - a
-        t = np.einsum("ij,ij->i", p - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), tol.zero)
-        q = a + np.clip(t, 0.0, 1.0)[:, None] * ab
-        d = p - q
+        t = np.clip(np.einsum("ij,ij->i", p - a, ab)
+                    / np.maximum(np.einsum("ij,ij->i", ab, ab), tol.zero), 0.0, 1.0)
+        d = p - (a + t[:, None] * ab)
         if normals is not None:
             d = d - np.einsum("ij,ij->i", d, normals)[:, None] * normals
         dd = np.linalg.norm(d, axis=1)
-        best = np.where(valid, np.minimum(best, dd), best)
+        closer = valid & (dd < best)
+        best = np.where(closer, dd, best)
+        far = np.where(closer, nb, far)
+        foot_t = np.where(closer, t, foot_t)
     if normals is not None:
         d0 = p[j] - p
-        d0 = d0 - np.einsum("ij,ij->i", d0, normals)[:, None] * normals
-        best = np.minimum(best, np.linalg.norm(d0, axis=1))
+        d0 = np.linalg.norm(d0 - np.einsum("ij,ij->i", d0, normals)[:, None] * normals, axis=1)
+        closer = d0 < best
+        best = np.where(closer, d0, best)
+        foot_t = np.where(closer, 0.0, foot_t)
     out[has] = best[has]
-    return out
+    return LineNeighbours(out, np.where(has, j, own), np.where(has, far, own),
+                          np.where(has, foot_t, 0.0))
 
 
 def band_width(points: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64],

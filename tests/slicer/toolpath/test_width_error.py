@@ -99,3 +99,33 @@ def test_band_width_is_the_sum_of_both_sides() -> None:
     assert np.allclose(width_error.band_width(off_middle, a, b), 4.0, atol=0.01)
     # no second side: NaN
     assert np.isnan(width_error.band_width(pts[:1], lower[:-1], lower[1:])).all()
+
+
+def test_foot_interpolates_the_neighbours_value() -> None:
+    # the neighbour sampled every 2 mm, offset half a step: its foot falls between samples
+    pts, line = _parallel(2, 1.0, n_pts=11)
+    pts[line == 1, 0] += 1.0
+    near = width_error.line_neighbours(pts, line)
+    value = pts[:, 0] + 10.0 * line  # linear along each line: interpolation is exact
+    inner = (line == 0) & (pts[:, 0] > 1.5) & (pts[:, 0] < 19.5)
+    assert np.allclose(near.at_foot(value)[inner], pts[inner, 0] + 10.0)
+    lone = width_error.line_neighbours(*_parallel(1, 1.0))
+    assert np.array_equal(lone.at_foot(np.arange(50.0)), np.arange(50.0))
+
+
+def test_lines_of_different_width_are_measured_against_their_mean() -> None:
+    from slicer.toolpath.build import _measure
+    from slicer.toolpath.lines import SurfaceLines
+
+    # three lines 3, 5 and 7 mm wide, 4 and 6 mm apart: they tile the plane exactly, while
+    # each line's nearest neighbour is 1 mm off its own width (the measure before session 13)
+    pts, line = _parallel(3, 1.0)
+    pts[:, 1] = np.array([0.0, 4.0, 10.0])[line]
+    width = np.array([3.0, 5.0, 7.0])[line]
+    lines = SurfaceLines(points=pts, line=line, face=np.zeros(len(pts), np.int64),
+                         bary=np.tile([1.0, 0.0, 0.0], (len(pts), 1)),
+                         closed=np.zeros(3, bool))
+    normals = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    measured = _measure(lines, width, normals, lambda: (np.zeros((0, 3)), np.zeros((0, 3))))
+    assert np.allclose(measured.error, 0.0)
+    assert np.allclose(np.sort(np.unique(np.round(measured.pointwise, 6))), [1 / 7, 0.2, 1 / 3])
