@@ -5,7 +5,7 @@ stage timings are read back from its report.json. Usage:
 
     .venv/bin/python bench/run.py [--examples socket aorta ...] [--until layers|toolpath]
                                   [--repeat N] [--out bench/results] [--cache DIR]
-                                  [--edge-length MM] [--layer-height MM]
+                                  [--edge-length MM] [--layer-height MM] [--no-baselines]
 
 Prints one row per example: tets, layers, stage timings (median over repeats), peak memory,
 and under it the toolpath quality of the last run (width error per pattern, volume error,
@@ -41,7 +41,7 @@ PAPER = {
 
 def run_one(
     name: str, until: str, out: Path, edge: float | None, model: Path | None = None,
-    layer_height: float | None = None,
+    layer_height: float | None = None, baselines: bool = True,
 ) -> dict[str, Any]:
     """Slice one example in a child process; returns its report plus peak memory (MB)."""
     model = model or next(EXAMPLES.glob(f"{name}.*[lLyY]"))
@@ -54,6 +54,8 @@ def run_one(
         cmd += ["--edge-length", str(edge)]
     if layer_height is not None:
         cmd += ["--layer-height", str(layer_height)]
+    if not baselines:
+        cmd += ["--no-baselines"]
     before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
     start = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
@@ -110,6 +112,8 @@ def main() -> int:
     parser.add_argument("--edge-length", type=float, default=None)
     parser.add_argument("--layer-height", type=float, default=None,
                         help="override the job's layer height, mm (e.g. to reach a layer count)")
+    parser.add_argument("--no-baselines", action="store_true",
+                        help="mesp slice --no-baselines (production settings)")
     parser.add_argument("--out", type=Path, default=ROOT / "bench" / "results")
     parser.add_argument("--cache", type=Path, default=None, help="tet mesh cache directory")
     args = parser.parse_args()
@@ -128,7 +132,7 @@ def main() -> int:
                 runs.append(first)
         for _ in range(args.repeat):
             report = run_one(name, args.until, args.out / name, args.edge_length, model,
-                             args.layer_height)
+                             args.layer_height, not args.no_baselines)
             if runs and "tetrahedralize" in runs[0]["timing_s"]:
                 report["timing_s"]["tetrahedralize"] = runs[0]["timing_s"]["tetrahedralize"]
             runs.append(report)

@@ -169,6 +169,7 @@ class ToolpathConfig:
     stripe_perimeter: bool = False
     first_layer_beta: float = 0.0
     boundary_distance: Literal["eikonal", "heat"] = "eikonal"
+    measure_baselines: bool = True
 
     def __post_init__(self) -> None:
         if self.boundary_distance not in ("eikonal", "heat"):

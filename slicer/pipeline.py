@@ -195,7 +195,8 @@ def _toolpath(
 
     profile = load_profile(job.extrusion.profile)
     layers = extraction.layers
-    result = compute_toolpath(layers, job, profile, progress=progress)
+    result = compute_toolpath(layers, job, profile, progress=progress,
+                              measure_baselines=job.toolpath.measure_baselines)
     report = dict(result.report)
     toolpath = result.toolpath
     if job.toolpath.flush:

@@ -49,6 +49,12 @@ def register(sub: Any) -> None:
     )
     p.add_argument("--planar", action="store_true", help="planar slicing (g = z)")
     p.add_argument(
+        "--no-baselines",
+        action="store_true",
+        help="skip the width error without deformation and of the Poisson alternative "
+        "(report-only comparisons, about a third of the toolpath's work)",
+    )
+    p.add_argument(
         "--until",
         choices=["tetmesh", "layers", "toolpath"],
         default="toolpath",
@@ -75,6 +81,8 @@ def job_from_args(args: argparse.Namespace) -> JobConfig:
         slicing["planar"] = True
     if slicing:
         overrides["slicing"] = slicing
+    if args.no_baselines:
+        overrides["toolpath"] = {"measure_baselines": False}
     return job.with_overrides(**overrides) if overrides else job
 
 

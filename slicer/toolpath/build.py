@@ -1176,7 +1176,7 @@ def compute_toolpath(
         profile: the extrusion profile.
         progress: receives ``update(fraction, detail)`` per finished chunk of layers.
         measure_baselines: also compute the width error without deformation and of the
-            Poisson alternative on stripe layers (about triples the work).
+            Poisson alternative on stripe layers (a third of the work on the socket).
         workers: processes; 1 (or few layers) runs in the calling process.
     """
     t_start = time.perf_counter()
@@ -1211,6 +1211,8 @@ def compute_toolpath(
     results.sort(key=lambda r: r.index)
     toolpath, stats = assemble(results)
     report, errors, status, timings = _report(results, toolpath, profile)
+    # without them width_error_undeformed and width_error_poisson_stripe have n = 0
+    report["baselines_measured"] = measure_baselines
     timings["total"] = time.perf_counter() - t_start
     report["timing_s"] = {k: round(v, 3) for k, v in timings.items()}
     report["per_layer"] = stats

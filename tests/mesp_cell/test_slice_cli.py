@@ -186,3 +186,16 @@ def test_slicer_notes_reach_the_operator(tmp_path: Path) -> None:
     assert "note: slicing: critical selector 'top@z>100' kept no patch" in proc.stdout
     report = json.loads((tmp_path / "out" / "report.json").read_text())
     assert "critical selector 'top@z>100' kept no patch" in report["slicing"]["notes"]
+
+
+def test_no_baselines_flag_turns_the_baseline_measurements_off() -> None:
+    import argparse
+
+    from mesp_cell.commands import slice as slice_command
+
+    parser = argparse.ArgumentParser()
+    slice_command.register(parser.add_subparsers())
+    on = parser.parse_args(["slice", "m.stl", "--out", "o"])
+    off = parser.parse_args(["slice", "m.stl", "--out", "o", "--no-baselines"])
+    assert slice_command.job_from_args(on).toolpath.measure_baselines
+    assert not slice_command.job_from_args(off).toolpath.measure_baselines

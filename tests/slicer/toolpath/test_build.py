@@ -206,6 +206,18 @@ def test_report_keys_and_measured_width_error(discs: tuple[Layers, ToolpathResul
     json.dumps(rep)  # the report section is plain JSON
 
 
+def test_baselines_are_reported_as_skipped(discs: tuple[Layers, ToolpathResult]) -> None:
+    layers, full = discs
+    skipped = compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False, workers=1)
+    rep = skipped.report
+    assert full.report["baselines_measured"] and not rep["baselines_measured"]
+    assert rep["width_error_undeformed"]["contour"]["n"] == 0
+    assert rep["width_error_poisson_stripe"]["n"] == 0
+    # nothing printed depends on them
+    assert np.array_equal(skipped.toolpath.position, full.toolpath.position)
+    assert rep["width_error"] == full.report["width_error"]
+
+
 def test_curved_caps_on_layer_with_radial_normals(caps: tuple[Layers, ToolpathResult]) -> None:
     _, res = caps
     tp = res.toolpath
