@@ -12,9 +12,13 @@ triangle (a, b, c) takes the shortest way to the opposite edge, min over the edg
 P(l) = a + l (b - a) of T(P) + |P - c|, with T linear along the edge (the triangle update of
 fast marching in its edge-interpolation form; closed form below). Boundary edges have T = 0 at
 both ends, so a vertex next to the boundary gets its exact distance to the boundary segment,
-not to the nearest boundary vertex. The update is applied to all triangles at once (Jacobi
-passes, vectorised), starting from Dijkstra's graph distance, an upper bound; a pass revisits
-only the triangles around vertices that changed in the previous one, until nothing changes.
+not to the nearest boundary vertex. The updates run to their fixed point in a compiled
+label-correcting loop (``_solve``): a queue of vertices seeded with the sources; taking one
+updates the corners opposite each edge it ends, and a corner whose distance falls by more than
+the tolerance joins the queue. The update is monotone, so the order of the updates does not
+change the fixed point, only how many it takes; Jacobi passes over all triangles from
+Dijkstra's graph distance (the vectorised solver before session 14, ``triangle_update``) reach
+the same distances to 1e-6 mm, in 10-20 x the time.
 
 Where two fronts meet (the medial axis, a disc's centre) the distance has a kink that the
 linear interpolation along an edge cuts, so there it falls short by up to about half an edge.
@@ -33,40 +37,26 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
-import scipy.sparse as sp
+from numba import njit
 from numpy.typing import NDArray
-from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
 from slicer.tolerance import tol
 
+ZERO = tol.zero  # numba kernels read module constants, not attributes
 
 class EikonalResult(NamedTuple):
     """Distance from a source set and how the solve went.
 
     distance: (n,) float64, mm, per vertex (0 on the sources, inf where unreachable).
-    passes:   int, Jacobi passes run.
-    converged: bool, False when ``max_passes`` stopped it first (the distance is then still an
-        upper bound, at least as good as the graph distance).
+    passes:   int, vertex visits of the solve over n, rounded up (the sweeps they amount to).
+    converged: bool, False when ``max_passes`` x n visits stopped it first (the distance is
+        then still an upper bound, at least as good as the graph distance).
     """
 
     distance: NDArray[np.float64]
     passes: int
     converged: bool
-
-
-def _graph_distance(v: NDArray[np.float64], f: NDArray[np.int64],
-                    src: NDArray[np.int64]) -> NDArray[np.float64]:
-    """(n,) float64 mm, shortest path along the mesh edges from ``src``."""
-    n = len(v)
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    w = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
-    # a zero-length edge would be dropped as "no edge" by csgraph: keep it connected
-    w = np.maximum(w, tol.zero)
-    graph = sp.coo_matrix((w, (e[:, 0], e[:, 1])), shape=(n, n)).tocsr()
-    out: NDArray[np.float64] = dijkstra(graph.maximum(graph.T), directed=False, indices=src,
-                                        min_only=True)
-    return out
 
 
 class _Corners(NamedTuple):
@@ -146,26 +136,101 @@ def eikonal_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     src = np.unique(np.asarray(sources, dtype=np.int64).ravel())
     if n == 0 or m == 0 or src.size == 0:
         return EikonalResult(np.full(n, np.inf), 0, True)
-    t = _graph_distance(v, f, src)
-    t[src] = 0.0
-    g = _corners(v, f)
-    # faces around each vertex, to revisit only what a change can affect
-    incidence = sp.csr_matrix((np.ones(3 * m, dtype=np.int8),
-                               (f.ravel(), np.repeat(np.arange(m), 3))), shape=(n, m))
     is_src = np.zeros(n, dtype=bool)
     is_src[src] = True
-    active = np.arange(m)
-    passes = 0
-    while active.size and passes < max_passes:
-        passes += 1
-        cand, ids = _update(g, np.concatenate([active + k * m for k in range(3)]), t)
-        new = t.copy()
-        np.minimum.at(new, ids, cand)
-        new[is_src] = 0.0
-        changed = np.flatnonzero(new < t - tolerance)
-        t = new
-        active = np.unique(incidence[changed].indices) if changed.size else changed
-    return EikonalResult(t, passes, active.size == 0)
+    t, visits, stopped = _solve(v, f, is_src, float(tolerance), int(max_passes) * n)
+    return EikonalResult(t, -(-int(visits) // n), not stopped)
+
+
+@njit(cache=True)
+def _candidate(ta: float, tb: float, ee: float, p: float, q: float, bc: float) -> float:
+    """``_update`` for one rotation: the distance of c through the edge a-b."""
+    if not (np.isfinite(ta) and np.isfinite(tb)):
+        return min(ta + np.sqrt(q), tb + bc)
+    dt = tb - ta
+    cross = max(ee * q - p * p, 0.0)
+    room = ee - dt * dt
+    if room > ZERO * max(ee, ZERO):
+        lam = (-p - dt * np.sqrt(cross / room)) / max(ee, ZERO)
+    else:
+        lam = 0.0 if dt > 0.0 else 1.0
+    lam = min(max(lam, 0.0), 1.0)
+    return ta + lam * dt + np.sqrt(max(q + 2.0 * lam * p + lam * lam * ee, 0.0))
+
+
+@njit(cache=True)
+def _solve(v: NDArray[np.float64], f: NDArray[np.int64], is_src: NDArray[np.bool_],
+           tolerance: float, max_visits: int) -> tuple[NDArray[np.float64], int, bool]:
+    """The distance (n,) from the vertices ``is_src`` at the fixed point of the triangle
+    updates (module doc), by a label-correcting queue seeded with the sources.
+
+    A vertex x taken from the queue updates, in each face around it, the two other corners
+    through their edges to x; a corner whose distance falls by more than ``tolerance`` joins
+    the queue (at most once at a time: a ring buffer of n). Every fixed point lies below the
+    graph distance (a corner is never farther than through an edge end), so starting from
+    inf rather than from Dijkstra's distance reaches the same one.
+    Returns (distance, vertex visits, whether max_visits stopped it first).
+    """
+    n, m = len(v), len(f)
+    # faces around each vertex (CSR by a counting sort)
+    ptr = np.zeros(n + 1, dtype=np.int64)
+    for i in range(m):
+        for k in range(3):
+            ptr[f[i, k] + 1] += 1
+    for x in range(n):
+        ptr[x + 1] += ptr[x]
+    fill = ptr[:-1].copy()
+    around = np.empty(3 * m, dtype=np.int64)
+    for i in range(m):
+        for k in range(3):
+            x = f[i, k]
+            around[fill[x]] = i
+            fill[x] += 1
+    t = np.full(n, np.inf)
+    queue = np.empty(n, dtype=np.int64)
+    queued = np.zeros(n, dtype=np.bool_)
+    head, size = 0, 0
+    for x in range(n):
+        if is_src[x]:
+            t[x] = 0.0
+            queue[size] = x
+            queued[x] = True
+            size += 1
+    visits = 0
+    while size > 0:
+        if visits >= max_visits:
+            return t, visits, True
+        x = queue[head]
+        head = (head + 1) % n
+        size -= 1
+        queued[x] = False
+        visits += 1
+        for j in range(ptr[x], ptr[x + 1]):
+            i = around[j]
+            for k in range(3):
+                if f[i, k] == x:
+                    y, z = f[i, (k + 1) % 3], f[i, (k + 2) % 3]
+            for turn in range(2):
+                c, o = (y, z) if turn == 0 else (z, y)
+                if is_src[c]:
+                    continue
+                # c through the edge x-o
+                ex, ey, ez = v[o, 0] - v[x, 0], v[o, 1] - v[x, 1], v[o, 2] - v[x, 2]
+                dx, dy, dz = v[x, 0] - v[c, 0], v[x, 1] - v[c, 1], v[x, 2] - v[c, 2]
+                ee = ex * ex + ey * ey + ez * ez
+                p = dx * ex + dy * ey + dz * ez
+                q = dx * dx + dy * dy + dz * dz
+                ox, oy, oz = v[o, 0] - v[c, 0], v[o, 1] - v[c, 1], v[o, 2] - v[c, 2]
+                bc = np.sqrt(ox * ox + oy * oy + oz * oz)
+                cand = _candidate(t[x], t[o], ee, p, q, bc)
+                if cand < t[c]:
+                    fell = t[c] - cand
+                    t[c] = cand
+                    if fell > tolerance and not queued[c]:
+                        queue[(head + size) % n] = c
+                        queued[c] = True
+                        size += 1
+    return t, visits, False
 
 
 PLANAR_TOLERANCE = 1e-6  # flat: every vertex within this x the component's size of a plane
@@ -214,8 +279,33 @@ def points_to_segments(points: NDArray[np.float64], a: NDArray[np.float64],
     if len(a) == 0:
         return np.full(len(x), np.inf)
     pa, pb = split_segments(a, b)
-    dist, _ = nearest_feet(x, pa, pb, NEAREST_PIECES)
-    out: NDArray[np.float64] = dist.min(axis=1)
+    kk = min(NEAREST_PIECES, len(pa))
+    _, near = cKDTree(0.5 * (pa + pb)).query(x, k=kk)
+    out: NDArray[np.float64] = _nearest_piece_distance(
+        x, pa, pb, np.asarray(near, dtype=np.int64).reshape(len(x), kk))
+    return out
+
+
+@njit(cache=True)
+def _nearest_piece_distance(x: NDArray[np.float64], pa: NDArray[np.float64],
+                            pb: NDArray[np.float64], near: NDArray[np.int64]
+                            ) -> NDArray[np.float64]:
+    """(P,) mm, the distance of each point x (P, 3) to the nearest of its pieces ``near``
+    (P, k) (ends pa, pb (S, 3) mm): ``nearest_feet``'s minimum without its (P, k, 3)
+    temporaries."""
+    out = np.empty(len(x))
+    for i in range(len(x)):
+        best = np.inf
+        for j in range(near.shape[1]):
+            s = near[i, j]
+            ab0, ab1, ab2 = pb[s, 0] - pa[s, 0], pb[s, 1] - pa[s, 1], pb[s, 2] - pa[s, 2]
+            ax0, ax1, ax2 = x[i, 0] - pa[s, 0], x[i, 1] - pa[s, 1], x[i, 2] - pa[s, 2]
+            u = (ax0 * ab0 + ax1 * ab1 + ax2 * ab2) / max(ab0 * ab0 + ab1 * ab1 + ab2 * ab2,
+                                                          ZERO)
+            u = min(max(u, 0.0), 1.0)
+            d0, d1, d2 = ax0 - u * ab0, ax1 - u * ab1, ax2 - u * ab2
+            best = min(best, d0 * d0 + d1 * d1 + d2 * d2)
+        out[i] = np.sqrt(best)
     return out
 
 

@@ -11,6 +11,7 @@ from slicer.toolpath.eikonal import (
     eikonal_distance,
     is_planar,
     planar_boundary_distance,
+    points_to_segments,
     surface_distance,
     triangle_update,
 )
@@ -169,3 +170,67 @@ def test_curved_disc_centre_is_not_cut_short() -> None:
     chord = np.linalg.norm(v[src] - v[top], axis=1).min()
     assert repaired >= chord - 0.01 > propagated  # at least the straight line to the rim
     assert repaired <= meridian  # never longer than the surface path
+
+
+def _jacobi_reference(v: np.ndarray, f: np.ndarray, src: np.ndarray) -> np.ndarray:
+    """The fixed point the vectorised way (the solver before session 14): Jacobi passes of
+    ``triangle_update`` over every triangle, from Dijkstra's graph distance."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import dijkstra
+
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    w = np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1)
+    g = sp.coo_matrix((w, (e[:, 0], e[:, 1])), shape=(len(v), len(v))).tocsr()
+    t = dijkstra(g.maximum(g.T), directed=False, indices=src, min_only=True)
+    t[src] = 0.0
+    for _ in range(5000):
+        cand, ids = triangle_update(v, f, t)
+        new = t.copy()
+        np.minimum.at(new, ids, cand)
+        new[src] = 0.0
+        if not np.any(new < t - 1e-9):
+            return new
+        t = new
+    raise AssertionError("the reference did not converge")
+
+
+@pytest.mark.parametrize("shape", ["dome", "annulus", "square"])
+def test_compiled_solver_reaches_the_jacobi_fixed_point(shape: str) -> None:
+    if shape == "dome":
+        v, f = disc(15.0, 0.9, jitter=0.3)
+        v = dome(v, 5.0, 15.0)
+    elif shape == "annulus":
+        v, f = disc(20.0, 1.1, inner=8.0, jitter=0.3)
+    else:
+        v, f = _coarse_square(20.0, 2.0, seed=3)
+    f = f.astype(np.int64)
+    src = np.flatnonzero(boundary_vertices(f, len(v)))
+    res = eikonal_distance(v, f, src)
+    assert res.converged
+    assert np.abs(res.distance - _jacobi_reference(v, f, src)).max() < 1e-6
+
+
+def test_a_visit_cap_stops_the_solve_with_an_upper_bound() -> None:
+    v, f = _coarse_square(20.0, 1.0, seed=2)
+    src = np.flatnonzero(boundary_vertices(f, len(v)))
+    full = eikonal_distance(v, f, src)
+    capped = eikonal_distance(v, f, src, max_passes=1)
+    assert full.converged and not capped.converged
+    assert capped.passes == 1
+    assert np.all(capped.distance >= full.distance - 1e-9)  # still an upper bound
+    assert np.isinf(capped.distance).any() or np.any(capped.distance > full.distance + 1e-6)
+
+
+def test_points_to_segments_matches_brute_force() -> None:
+    rng = np.random.default_rng(5)
+    # a polyline (pieces of similar length, like a boundary) and points all around it
+    angle = np.sort(rng.uniform(0.0, 2.0 * np.pi, 60))
+    ring = np.column_stack([10.0 * np.cos(angle), 7.0 * np.sin(angle), rng.uniform(-1, 1, 60)])
+    a, b = ring, np.roll(ring, -1, axis=0)
+    x = rng.uniform(-14.0, 14.0, (500, 3))
+    ab = b - a
+    u = np.clip(np.einsum("pkj,kj->pk", x[:, None, :] - a, ab) / np.einsum("kj,kj->k", ab, ab),
+                0.0, 1.0)
+    brute = np.linalg.norm(x[:, None, :] - (a + u[..., None] * ab), axis=2).min(axis=1)
+    assert np.abs(points_to_segments(x, a, b) - brute).max() < 1e-9
+    assert np.all(np.isinf(points_to_segments(x, a[:0], b[:0])))
