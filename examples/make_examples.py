@@ -72,11 +72,13 @@ planar = true
 # Edge length: the paper's tet count (197.5 k); 1.2 mm would give ~0.55 M tets.
 # Layer height: model height / layer count. That gives 14 layers here, not 24: the layers
 # above the cavity follow the dome (a 3-9 mm shell), and their H reaches 3 mm, beyond the
-# extrusion profile's range. 0.70 mm gives the paper's 24 layers and a much better virtual
-# print (surface error 0.25 against 0.49 mm), but its thin dome layers tilt the nozzle
-# steeply at the dome's edge and the bundled cell refused 2 of 3 such plans; where it plans,
-# the arm slows down on the dome (printed at 12-25 mm/s), and the print as planned
-# (mesp inspect --as-planned) has 0.29 mm. 0.85 and 0.95 mm: refused too (README).
+# extrusion profile's range (virtual print surface error 0.42 mm). 0.70 mm gives the paper's
+# 24 layers and 0.24-0.25 mm, but its thin dome layers lean the nozzle 46-50 deg at the
+# dome's edge, where the bundled cell's tank walls stand in the way. The shallow tray of
+# planner/cells/tray.toml (mesp plan DIR --cell planner/cells/tray.toml) takes those leans:
+# there 3 of 5 fresh tet meshes plan (as planned 0.27-0.30 mm: the arm slows down on the
+# dome's stripe layers); the other two each have one step of a dome-edge stripe that no
+# nozzle orientation can follow within alpha [70, 110]. 0.85 mm: 2 of 3 (README).
 [mesh]
 edge_length_mm = 1.7
 

@@ -1,14 +1,18 @@
-"""Paper-size parts in the default cell: a tall part is reachable, a steep layer gets a lean."""
+"""Paper-size parts in the default cell: a tall part is reachable, a steep layer gets a lean;
+the shallow tray (planner/cells/tray.toml) takes a steep edge the deep tank refuses."""
 
 from __future__ import annotations
+
+from pathlib import Path
 
 import numpy as np
 import pytest
 
-from planner.cell import CellConfig
+from planner.cell import CellConfig, load_cell
 from planner.orientation import alpha_of, nozzle_axis
 from planner.placement import fit_gel
 from planner.plan import plan, repair_normals
+from slicer.stages import Toolpath
 from tests.planner import synthetic
 from tests.planner.synthetic import make_toolpath, random_frames
 
@@ -126,3 +130,38 @@ def test_smoothing_moves_sharp_normal_turns_only_and_within_the_cap() -> None:
     out, dev = smooth_normals(spiked, 2, 8.0)
     assert np.degrees(dev[20]) == pytest.approx(8.0)  # towards its neighbours, by the cap
     assert np.flatnonzero(dev > 1e-9).max() <= 20 + 2 and np.flatnonzero(dev > 1e-9).min() >= 18
+
+
+def _steep_edge(slope_deg: float) -> Toolpath:
+    """Stripes running down a flat part's edge (like the membrane's dome at 0.70 mm layers):
+    from y = 35 mm outwards, the layer's normal tilted ``slope_deg`` towards +y, and one flat
+    stripe along the far edge at y = -50 mm, so the part is 100 mm across."""
+    slope = np.radians(slope_deg)
+    t = np.arange(0.0, 15.0 + 1e-9, 0.5)
+    pos, nrm, path = [], [], []
+    for i, x in enumerate(np.arange(-20.0, 21.0, 4.0)):
+        P = np.stack([np.full_like(t, x), 35.0 + t * np.cos(slope), 20.0 - t * np.sin(slope)], 1)
+        pos.append(P if i % 2 == 0 else P[::-1])
+        nrm.append(np.tile([0.0, np.sin(slope), np.cos(slope)], (len(t), 1)))
+        path.append(np.full(len(t), i))
+    xs = np.arange(-20.0, 20.0 + 1e-9, 0.5)
+    pos.append(np.stack([xs, np.full_like(xs, -50.0), np.full_like(xs, 20.0)], 1))
+    nrm.append(np.tile([0.0, 0.0, 1.0], (len(xs), 1)))
+    path.append(np.full(len(xs), len(path)))
+    return make_toolpath(np.concatenate(pos), np.concatenate(nrm), np.concatenate(path))
+
+
+def test_the_tray_cell_takes_a_steep_edge_the_deep_tank_refuses(cell: CellConfig) -> None:
+    tray = load_cell(Path(__file__).resolve().parents[2] / "planner" / "cells" / "tray.toml")
+    # only the tank differs: the same arm, tool and limits
+    assert tray.robot == cell.robot and tray.tool == cell.tool
+    assert tray.planning == cell.planning
+    assert tray.tank.inner_size_mm[2] < 0.4 * cell.tank.inner_size_mm[2]
+    tp = _steep_edge(60.0)
+    # down a 60 deg edge the nozzle leans ~56 deg out (alpha >= 70 against the step):
+    # 300 mm up the nozzle, the extruder is ~250 mm out, where the deep tank's wall stands
+    deep = plan(tp, cell).report
+    assert deep["status"] != "ok"
+    shallow = plan(tp, tray).report
+    assert shallow["status"] == "ok" and shallow["unreachable"]["count"] == 0
+    assert shallow["min_clearance_mm"] >= tray.planning.clearance_mm - 1e-6
