@@ -35,7 +35,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "G-code written to DIR/baseline_prusaslicer.gcode; `make baselines` installs "
             "PrusaSlicer) or a commercial slicer's G-code (--gcode FILE), side by side. "
             "With --as-planned also the print as DIR/trajectory.npz moves the nozzle: where "
-            "the planner slows down, the constant-rate extruder deposits more. "
+            "the planner slows down, the cell scales the extruder's rate with the arm's speed "
+            "(lead-compensated, the screw's first-order lag simulated), or, with "
+            "--constant-flow, keeps C and deposits more. "
             "Adds an 'inspect' section to DIR/report.json and writes inspect_*.png into DIR."
         ),
     )
@@ -70,6 +72,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--as-planned", action="store_true",
                    help="also print at the speeds the planned trajectory (DIR/trajectory.npz, "
                         "from mesp plan) moves each segment at, and compare")
+    p.add_argument("--constant-flow", action="store_true",
+                   help="with --as-planned: the extruder keeps its rate C where the arm slows "
+                        "down (the cell scales it with the arm's speed)")
+    p.add_argument("--flow-lead", type=float, default=0.3, metavar="S",
+                   help="with --as-planned: how far ahead the rate is commanded (s, default "
+                        "0.3: the launch files' lead_s)")
+    p.add_argument("--flow-tau", type=float, default=0.2, metavar="S",
+                   help="with --as-planned: time constant of the extruder's flow response "
+                        "(s, default 0.2: the emulated extruder's)")
     p.add_argument("--no-figures", action="store_true", help="do not write the PNG pictures")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=run)
@@ -100,6 +111,9 @@ def run(args: argparse.Namespace) -> int:
                          f"re-run mesp slice MODEL --out {job}")
     if args.as_planned and not (job / "trajectory.npz").is_file():
         raise InputError(f"--as-planned needs {job / 'trajectory.npz'}", f"run mesp plan {job}")
+    for name, value in (("--flow-lead", args.flow_lead), ("--flow-tau", args.flow_tau)):
+        if not (np.isfinite(value) and 0.0 <= value <= 10.0):
+            raise InputError(f"{name} {value} is out of range", "use 0 to 10 s, e.g. 0.2")
     if args.gcode is not None and not Path(args.gcode).is_file():
         raise InputError(f"G-code file {args.gcode} does not exist", "check the --gcode path")
     if args.filament < 0:
@@ -131,18 +145,25 @@ def run(args: argparse.Namespace) -> int:
     elif args.flush:
         with timer.stage("flush"):
             toolpath, flush = _flush(job, toolpath, morphology)
-    planned = _planned_speeds(job, toolpath) if args.as_planned else None
+    planned, trajectory = _planned_speeds(job, toolpath) if args.as_planned else (None, None)
     slowed = None
     result = _simulate("multi-axis", toolpath, morphology, vertices, faces, config, timer)
     section: dict[str, Any] = {**result["summary"], "voxel_mm": config.voxel_mm,
                                "profile": profile_name}
-    if planned is not None:
-        from sim.as_planned import slowdown
+    if planned is not None and trajectory is not None:
+        from sim.as_planned import effective_speed, slowdown, synced_segment_ink
 
+        rate = float(morphology.rate_mm3_s)
+        ink = None if args.constant_flow else synced_segment_ink(
+            toolpath, trajectory, planned, rate, lead_s=args.flow_lead, tau_s=args.flow_tau)
+        speed = planned.speed if ink is None else effective_speed(toolpath, planned, ink, rate)
         as_planned = _simulate("as planned", toolpath, morphology, vertices, faces, config,
-                               timer, planned.speed)
-        slowed = slowdown(toolpath, planned, morphology)
-        section["as_planned"] = {**as_planned["summary"], **slowed.summary()}
+                               timer, speed)
+        slowed = slowdown(toolpath, planned, morphology, ink)
+        flow = {"flow": "constant" if ink is None else "synced"}
+        if ink is not None:
+            flow.update(flow_lead_s=args.flow_lead, flow_tau_s=args.flow_tau)
+        section["as_planned"] = {**as_planned["summary"], **slowed.summary(), **flow}
     if flush is not None:
         section["flush"] = flush
     base: dict[str, Any] | None = None
@@ -234,8 +255,9 @@ def _load_morphology(name: str | None, console: Any) -> tuple[Any, str]:
     return load_profile(chosen), chosen
 
 
-def _planned_speeds(job: Path, toolpath: Any) -> Any:
-    """sim.as_planned.segment_speeds of DIR/trajectory.npz (one-line errors if unusable)."""
+def _planned_speeds(job: Path, toolpath: Any) -> tuple[Any, Any]:
+    """(sim.as_planned.segment_speeds, the trajectory) of DIR/trajectory.npz (one-line errors
+    if unusable)."""
     from planner.trajectory import Trajectory
     from sim.as_planned import segment_speeds
 
@@ -246,7 +268,7 @@ def _planned_speeds(job: Path, toolpath: Any) -> Any:
     except (OSError, ValueError, KeyError) as exc:
         raise InputError(f"{job / 'trajectory.npz'} is not a readable trajectory ({exc})",
                          f"re-run mesp plan {job}") from exc
-    return segment_speeds(toolpath, trajectory)
+    return segment_speeds(toolpath, trajectory), trajectory
 
 
 def _simulate(label: str, toolpath: Any, morphology: Any, vertices: np.ndarray,

@@ -124,6 +124,9 @@ class StreamPlan:
         wp_layer: (W,) int64, layer of each waypoint (-1 when toolpath.npz is absent).
         layers: number of layers (0 when unknown).
         tool_T: (4, 4) float64, mm, nozzle tip in the flange frame.
+        flow_knots: (M,) float64, the extrusion rate over C on the step after each trajectory
+            sample that keeps the toolpath's ink per millimetre where the arm is slower than
+            the toolpath (``planner.flow.knot_flow_scale``); all 1 without toolpath.npz.
     """
 
     dt: float
@@ -136,6 +139,7 @@ class StreamPlan:
     wp_layer: np.ndarray
     layers: int
     tool_T: np.ndarray
+    flow_knots: np.ndarray
 
     @property
     def samples(self) -> int:
@@ -175,6 +179,11 @@ class StreamPlan:
         i = int(np.searchsorted(self.t, self.dt * k, side="right")) - 1
         return bool(self.extrude_knots[min(max(i, 0), len(self.t) - 1)])
 
+    def flow_at(self, k: int) -> float:
+        """The extrusion rate over C for servo sample ``k`` (``flow_knots``)."""
+        i = int(np.searchsorted(self.t, self.dt * k, side="right")) - 1
+        return float(self.flow_knots[min(max(i, 0), len(self.t) - 1)])
+
     def first_extruding(self) -> int:
         """The first servo sample that deposits (``samples`` if none does)."""
         knots = np.flatnonzero(self.extrude_knots)
@@ -200,7 +209,8 @@ class StreamPlan:
             q = np.vstack([q, q[-1:]])
         empty = np.zeros(0, dtype=np.int64)
         return StreamPlan(dt, t - t[0], q, np.zeros(len(t), bool), empty, empty,
-                          np.zeros(0, bool), empty, 0, np.asarray(tool_T, dtype=np.float64))
+                          np.zeros(0, bool), empty, 0, np.asarray(tool_T, dtype=np.float64),
+                          np.ones(len(t)))
 
     @staticmethod
     def load(path: Path, dt: float, sha256: str = "") -> StreamPlan:
@@ -255,8 +265,12 @@ class StreamPlan:
         wp_sample = np.minimum(np.ceil(t[has] / dt - 1e-9).astype(np.int64), K - 1)
         wp_layer = np.full(wp_id.shape, -1, dtype=np.int64)
         layers = 0
+        flow = np.ones(M)
         tp = path.parent / "toolpath.npz"
         if tp.is_file():
+            from types import SimpleNamespace
+
+            from planner.flow import knot_flow_scale
             from slicer.stages import Toolpath
 
             toolpath = Toolpath.load(path.parent)
@@ -266,8 +280,10 @@ class StreamPlan:
                                  "re-plan the job")
             wp_layer = toolpath.layer[wp_id].astype(np.int64)
             layers = int(toolpath.layer.max()) + 1 if toolpath.layer.size else 0
+            if len(wp_id) == len(toolpath):  # a whole job's plan: the speeds it keeps
+                flow = knot_flow_scale(toolpath, SimpleNamespace(t=t, waypoint=wp, extrude=ex))
         return StreamPlan(dt, t, q, ex, wp_id, wp_sample, ex[has], wp_layer, layers,
-                          np.asarray(a["tool_T"], dtype=np.float64))
+                          np.asarray(a["tool_T"], dtype=np.float64), flow)
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,11 @@ plunge along the target's axis; refused with its reason if the cell model finds 
 ``stream`` (args ``start``, ``end``, ``after_waypoint``, ``lead_s``, ``rate``) streams the
 samples ``start`` .. ``end`` - 1 (default: to the end) and
 switches the extruder ``lead_s`` ahead of every change of deposition, on the servo clock (lead
-compensation of the extruder's flow response); ``stop``; ``reset`` clears a latched e-stop.
+compensation of the extruder's flow response); while depositing it also scales the rate with
+the arm's planned speed, ``lead_s`` ahead (``set_rate`` to C x ``StreamPlan.flow_at``, when it
+moves by more than FLOW_STEP of C, at most every FLOW_INTERVAL_S of wall time), so the ink per
+millimetre stays the slicer's where the planner slowed the arm (``sync_flow``, default on);
+``stop``; ``reset`` clears a latched e-stop.
 Motions run in one motion thread; their end is published as a ``StreamEvent`` on
 ``robot/event``. Interlocks, checked before every servo sample: no e-stop,
 the extruder and supervisor processes present, and the extruder running (fresh state) wherever
@@ -152,11 +156,48 @@ class MustRun:
         return bool(self.mask[k - self.c0])
 
 
+FLOW_STEP = 0.03  # a rate change smaller than this x C is not sent
+FLOW_INTERVAL_S = 0.02  # s of wall time between two rate commands, at least (bus, Modbus)
+
+
+class FlowSync:
+    """The rate commands of one stream that keep the ink per millimetre where the arm is
+    slower than the toolpath: at servo sample k, C x ``plan.flow_at(k + lead_n)`` (the step
+    the nozzle will be on when the screw has followed), sent when it differs from the last
+    sent by more than FLOW_STEP x C and ``interval_n`` samples have passed since."""
+
+    def __init__(self, plan: StreamPlan, rate: float, lead_n: int, end: int, interval_n: int,
+                 start: int) -> None:
+        self.plan, self.rate, self.lead_n, self.end = plan, rate, lead_n, end
+        self.interval_n = max(int(interval_n), 1)
+        self.sent = rate  # the supervisor starts the extruder at C
+        self.sent_k = start - self.interval_n
+
+    def _target(self, k: int) -> float:
+        return self.rate * self.plan.flow_at(min(k + self.lead_n, self.end - 1))
+
+    def switch_on(self, k: int) -> float:
+        """The rate to start the extruder at, at sample ``k``."""
+        self.sent, self.sent_k = self._target(k), k
+        return self.sent
+
+    def __call__(self, k: int) -> float | None:
+        """The rate to command at sample ``k`` while depositing, None to keep the last."""
+        if k - self.sent_k < self.interval_n:
+            return None
+        target = self._target(k)
+        if abs(target - self.sent) <= FLOW_STEP * self.rate:
+            return None
+        self.sent, self.sent_k = target, k
+        return target
+
+
 class RobotNode(LifecycleNode):
     """See the module docstring. Parameters: backend, host, servo (table), home_deg, tool_T,
     sim_clock (twin backends: the clock file shared with the extruder emulator), state_hz
     (100), extruder (node name), supervisor (node name), extruder_fresh_s (0.05: max age of the
-    extruder state), switch_margin_s (0.1: time allowed for a switch-on to show)."""
+    extruder state), switch_margin_s (0.1: time allowed for a switch-on to show), sync_flow
+    (true: scale the extrusion rate with the arm's planned speed)."""
 
     def on_configure(self) -> None:
         p = self.params
@@ -181,6 +222,7 @@ class RobotNode(LifecycleNode):
         self.supervisor_name = p.get("supervisor", "supervisor")
         self.fresh_s = float(p.get("extruder_fresh_s", 0.05))
         self.margin_s = float(p.get("switch_margin_s", 0.1))
+        self.sync_flow = bool(p.get("sync_flow", True))
         self._switches: queue.Queue[tuple[str, float]] = queue.Queue()
         self.state_period = 1.0 / float(p.get("state_hz", 100.0))
         self.alive: set[str] = set()
@@ -429,13 +471,20 @@ class RobotNode(LifecycleNode):
             return plan.extrude_at(min(k + lead_n, end - 1))
 
         switched = {"on": cmd_on(start)}
+        flow = FlowSync(plan, rate, lead_n, end, self._latency_samples(FLOW_INTERVAL_S, plan),
+                        start) if self.sync_flow else None
 
         def on_sample(k: int) -> None:
             # Lead compensation on the servo clock: switch lead_n samples ahead.
             on = cmd_on(k)
             if on != switched["on"]:
                 switched["on"] = on
-                self._switches.put(("start" if on else "stop", rate))
+                self._switches.put(("start", flow.switch_on(k) if flow else rate) if on
+                                   else ("stop", rate))
+            elif on and flow is not None:
+                change = flow(k)
+                if change is not None:
+                    self._switches.put(("set_rate", change))
 
         why = guard(start)
         if why:

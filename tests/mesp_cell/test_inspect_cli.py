@@ -92,6 +92,8 @@ def test_inspect_with_planar_and_gcode_baselines(job: Path) -> None:
         (["inspect", "{job}", "--gcode", "{missing}"], "does not exist"),
         (["inspect", "{job}", "--flush"], "tetmesh.npz"),
         (["inspect", "{job}", "--as-planned"], "mesp plan"),
+        (["inspect", "{job}", "--flow-tau", "-1"], "--flow-tau"),
+        (["inspect", "{job}", "--flow-lead", "nan"], "--flow-lead"),
     ],
 )
 def test_user_mistakes_are_one_line(job: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
@@ -215,25 +217,37 @@ def _save_trajectory(job: Path, slow: float, n: int | None = None) -> None:
 def test_inspect_as_planned_prints_at_the_trajectory_speeds(
         job: Path, capsys: pytest.CaptureFixture[str]) -> None:
     _save_trajectory(job, slow=3.0)
-    assert main(["inspect", str(job), "--voxel", "0.25", "--as-planned", "--quiet"]) == 0
+    # an extruder that keeps its rate C (--constant-flow): layer 1's ink three times over
+    assert main(["inspect", str(job), "--voxel", "0.25", "--as-planned", "--constant-flow",
+                 "--quiet"]) == 0
     section = read_report(job)["inspect"]
     assert "inspect_as_planned.png" in section["figures"]
     assert (job / "inspect_as_planned.png").stat().st_size > 1000
     planned = section["as_planned"]
+    assert planned["flow"] == "constant"
     assert 0.1 < planned["slowed_length_fraction"] < 0.9
     assert planned["speed_ratio_min"] == pytest.approx(1.0 / 3.0, rel=1e-6)
-    # layer 1's ink is deposited three times over: more ink, more of it outside the model
     assert planned["extra_ink_mm3"] > 0.2 * section["commanded_volume_mm3"]
     assert planned["over_deposition"] > section["over_deposition"]
     assert abs(planned["volume_conservation_error"]) < 0.02
     assert "as planned" in capsys.readouterr().out
-    # at the toolpath's own speeds the two prints are the same
-    _save_trajectory(job, slow=1.0)
+    # the cell's synced extruder (the default) follows the slowdown: the ink per millimetre
+    # stays the toolpath's but within about tau of the changes of speed
     assert main(["inspect", str(job), "--voxel", "0.25", "--as-planned", "--quiet",
                  "--no-figures"]) == 0
     section = read_report(job)["inspect"]
-    assert section["as_planned"]["extra_ink_mm3"] == pytest.approx(0.0, abs=1e-6)
-    assert section["as_planned"]["infill_ratio"] == pytest.approx(section["infill_ratio"])
+    synced = section["as_planned"]
+    assert synced["flow"] == "synced" and synced["flow_tau_s"] == 0.2
+    assert abs(synced["extra_ink_mm3"]) < 0.1 * planned["extra_ink_mm3"]
+    assert synced["over_deposition"] < planned["over_deposition"]
+    # at the toolpath's own speeds the prints are the same, whatever the extruder does
+    _save_trajectory(job, slow=1.0)
+    for flow in ([], ["--constant-flow"]):
+        assert main(["inspect", str(job), "--voxel", "0.25", "--as-planned", "--quiet",
+                     "--no-figures", *flow]) == 0
+        section = read_report(job)["inspect"]
+        assert section["as_planned"]["extra_ink_mm3"] == pytest.approx(0.0, abs=1e-6)
+        assert section["as_planned"]["infill_ratio"] == pytest.approx(section["infill_ratio"])
 
 
 def test_inspect_as_planned_refuses_another_jobs_trajectory(

@@ -331,3 +331,40 @@ def test_a_thirty_hour_job_loads_without_building_its_servo_samples(tmp_path: Pa
     assert np.allclose(plan.q_at(k), [np.interp(k * 0.002, t, q[:, j]) for j in range(6)])
     must = MustRun(plan.extrude, 25, 50, k)
     assert all(must(i) for i in range(k + 50, k + 100))
+
+
+def test_flow_sync_commands_the_rate_of_the_step_ahead() -> None:
+    from dataclasses import replace
+
+    from mesp_cell.nodes.robot_node import FLOW_STEP, FlowSync
+
+    # 4 s of trajectory; from t = 2 to 3 s the arm moves at half the toolpath's speed
+    plan = StreamPlan.of_path(0.1, np.arange(5.0), np.zeros((5, 6)), np.eye(4))
+    plan = replace(plan, flow_knots=np.array([1.0, 1.0, 0.5, 1.0, 1.0]))
+    assert plan.flow_at(19) == 1.0 and plan.flow_at(20) == 0.5 and plan.flow_at(30) == 1.0
+    sync = FlowSync(plan, rate=6.0, lead_n=3, end=plan.samples, interval_n=2, start=0)
+    sent = {k: r for k in range(plan.samples) if (r := sync(k)) is not None}
+    # lead 3 samples: half the rate from sample 17, back to C from sample 27
+    assert sent == {17: pytest.approx(3.0), 27: pytest.approx(6.0)}
+    # a switch-on commands the rate of the step ahead at once
+    again = FlowSync(plan, rate=6.0, lead_n=3, end=plan.samples, interval_n=2, start=0)
+    assert again.switch_on(18) == pytest.approx(3.0)
+    assert again(19) is None  # within the interval
+    # changes within FLOW_STEP of C are not sent; the interval holds back the next command
+    small = replace(plan, flow_knots=np.array([1.0, 1.0 - 0.5 * FLOW_STEP, 1.0, 0.2, 0.9]))
+    quiet = FlowSync(small, rate=6.0, lead_n=0, end=small.samples, interval_n=15, start=0)
+    got = {k: r for k in range(small.samples) if (r := quiet(k)) is not None}
+    assert got == {30: pytest.approx(1.2)}  # 0.9 C at sample 40 comes within the interval
+    assert quiet(45) == pytest.approx(5.4)
+
+
+def test_a_plan_with_its_toolpath_gets_the_flow_scale(job: Path) -> None:
+    from planner.flow import MIN_FLOW_SCALE
+
+    plan = StreamPlan.load(job / "trajectory.npz", 0.002)
+    assert plan.flow_knots.shape == plan.t.shape
+    assert plan.flow_knots.min() >= MIN_FLOW_SCALE and plan.flow_knots.max() <= 1.0
+    alone = job / "alone"
+    alone.mkdir()
+    (alone / "trajectory.npz").write_bytes((job / "trajectory.npz").read_bytes())
+    assert np.all(StreamPlan.load(alone / "trajectory.npz", 0.002).flow_knots == 1.0)

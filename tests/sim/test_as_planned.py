@@ -104,3 +104,39 @@ def test_a_trajectory_of_another_toolpath_is_refused() -> None:
         segment_speeds(tp, other)
     with pytest.raises(InputError, match="segments"):
         extrusion_segments(tp, EllipseMorphology(), segment_speed=np.ones(3))
+
+
+def _long_slowdown() -> tuple[Toolpath, Trajectory]:
+    """A 60 mm line at 8 mm/s whose middle 20 mm the arm takes at a quarter of the speed
+    (7.5 s instead of 2.5 s): a slowdown much longer than the screw's time constant."""
+    tp = _line_toolpath(n=121)
+    return tp, _trajectory(tp, {k: 4.0 for k in range(40, 80)})
+
+
+def test_synced_flow_keeps_the_ink_per_millimetre_through_a_slowdown() -> None:
+    from sim.as_planned import effective_speed, synced_segment_ink
+
+    tp, tr = _long_slowdown()
+    morph = EllipseMorphology()
+    c = morph.rate_mm3_s
+    planned = segment_speeds(tp, tr)
+    target = c * planned.target_duration  # what the toolpath asks for, per segment
+    constant = c * planned.duration
+    # an ideal screw (no lag) commanded without lead lays exactly the toolpath's ink
+    ideal = synced_segment_ink(tp, tr, planned, c, lead_s=0.0, tau_s=0.0)
+    assert ideal.sum() == pytest.approx(target.sum(), rel=2e-3)
+    assert np.abs(ideal - target).max() < 0.02 * target.max()
+    # the bundled cell's lead 0.3 s and tau 0.2 s: short of ideal only near the two changes,
+    # and a small part of what a constant rate adds
+    real = synced_segment_ink(tp, tr, planned, c, lead_s=0.3, tau_s=0.2)
+    extra_constant = constant.sum() - target.sum()
+    assert abs(real.sum() - target.sum()) < 0.05 * extra_constant
+    assert np.abs(real[45:75] - target[45:75]).max() < 0.01 * target[45:75].max()
+    # printed at the effective speed C L / ink: the deposit holds that ink
+    speed = effective_speed(tp, planned, real, c)
+    segs = extrusion_segments(tp, morph, segment_speed=speed)
+    assert segs.volume.sum() == pytest.approx(real.sum(), rel=1e-9)
+    summary = slowdown(tp, planned, morph, real).summary()
+    assert abs(summary["extra_ink_mm3"]) < 0.05 * extra_constant
+    assert slowdown(tp, planned, morph).summary()["extra_ink_mm3"] == pytest.approx(
+        extra_constant)
