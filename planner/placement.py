@@ -255,9 +255,15 @@ def _reason_text(reach: Reach, code: int) -> str:
 def _fix_text(reach: Reach, code: int) -> str:
     """What the user can change in the cell TOML for a failure of this kind."""
     name = reach.collision.names[code - 100] if code >= 100 else ""
+    if code == ALPHA:
+        # no placement changes the angle between the path and its own layer
+        return ("the path bends too sharply against its layer there for any nozzle angle "
+                "within [planning] alpha_min_deg..alpha_max_deg: re-slice with another "
+                "--layer-height or --edge-length")
     if "tank_wall" in name:
         return ("use a wider tank ([tank] inner_size_mm), a longer nozzle ([tool] "
-                "nozzle_length_mm, tip_xyz_mm) or a smaller model")
+                "nozzle_length_mm, tip_xyz_mm) or a smaller model; for a flat part the "
+                "shallow tray, --cell planner/cells/tray.toml")
     if "gel" in name or "tank_floor" in name:
         return ("lower the gel ([tank] gel_fill_mm), lift the model less ([placement] "
                 "offset_mm) or use a longer nozzle ([tool] nozzle_length_mm, tip_xyz_mm)")

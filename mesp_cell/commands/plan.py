@@ -102,7 +102,25 @@ def run(args: argparse.Namespace) -> int:
     if report["status"] != "ok":
         # the trajectory is kept for inspection, but a cell would refuse it: say so and fail
         print(f"mesp: error: the plan cannot be executed ({report['status']}); see plan in "
-              f"{job_dir / 'report.json'}, move the part or use a cell that reaches it",
-              file=sys.stderr)
+              f"{job_dir / 'report.json'}; {_fix(report, toolpath)}", file=sys.stderr)
         return 3
     return 0
+
+
+def _fix(report: dict[str, Any], toolpath: Any) -> str:
+    """What to do about a plan the cell cannot execute, by the first refused waypoint."""
+    unreachable = report["unreachable"]
+    if not unreachable["count"] or not unreachable["waypoints"]:
+        return "move the part or use a cell that reaches it"
+    first = unreachable["waypoints"][0]
+    i, reason = int(first["first"]), str(first["reason"])
+    x, y, z = (float(c) for c in toolpath.position[i])
+    where = f"waypoint {i} (layer {int(toolpath.layer[i])}, at {x:.1f}, {y:.1f}, {z:.1f} mm)"
+    if reason.startswith("printing angle"):
+        return (f"at {where} the path bends too sharply against its layer for any nozzle "
+                "angle within the cell's alpha range: re-slice with another --layer-height or "
+                "--edge-length")
+    if "tank_wall" in reason:
+        return (f"at {where} the tool reaches the tank wall: move the part, or for a flat part "
+                "plan for the shallow tray (--cell planner/cells/tray.toml)")
+    return f"at {where} ({reason}): move the part or use a cell that reaches it"

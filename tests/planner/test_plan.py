@@ -15,6 +15,7 @@ from planner.trajectory import Trajectory
 from slicer.report import read_report
 from slicer.stages import Toolpath
 from tests.planner import synthetic
+from tests.planner.synthetic import make_toolpath
 
 
 def test_trajectory_reaches_every_waypoint(dome_plan: PlanResult, dome_tp: Toolpath) -> None:
@@ -123,3 +124,33 @@ def test_alpha_holds_along_a_step_that_climbs_out_of_the_layer(cell: CellConfig)
     assert alpha.max() > 100.0  # the climb needed a tilt
     assert alpha.min() >= cell.planning.alpha_min_deg - 1e-6
     assert alpha.max() <= cell.planning.alpha_max_deg + 1e-6
+
+
+def test_a_path_bending_up_out_of_its_layer_is_refused_with_a_fix(
+        cell: CellConfig, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # a flat path that steps 1.5 mm straight up (along its own normal) and goes on: no
+    # nozzle axis is within alpha [70, 110] of both the flat steps and the vertical one
+    x = np.arange(0.0, 10.01, 0.5)
+    flat = np.column_stack([x, np.zeros_like(x), np.full_like(x, 5.0)])
+    up = np.array([[10.0, 0.0, 5.75], [10.0, 0.0, 6.5]])
+    on = np.column_stack([10.5 + x, np.zeros_like(x), np.full_like(x, 6.5)])
+    pos = np.concatenate([flat, up, on])
+    tp = make_toolpath(pos, np.tile([0.0, 0.0, 1.0], (len(pos), 1)),
+                       np.zeros(len(pos), np.int32))
+    tp.save(tmp_path)
+    # on so small a path the placement search samples the bend: refused before planning
+    code = main(["plan", str(tmp_path), "--quiet", "--no-figures"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1
+    assert "waypoint 21" in err[0] and "bends too sharply" in err[0] and "re-slice" in err[0]
+    # where the search's sample misses it, the plan's refusal names the layer and the spot
+    from mesp_cell.commands.plan import _fix
+
+    def report(reason: str) -> dict[str, object]:
+        return {"unreachable": {"count": 1, "waypoints": [
+            {"first": 21, "last": 21, "reason": reason}]}}
+
+    fix = _fix(report("printing angle alpha outside the allowed range"), tp)
+    assert "waypoint 21 (layer 0, at 10.0, 0.0, 5.8 mm)" in fix and "re-slice" in fix
+    assert "tray" in _fix(report("collision (extruder vs tank_wall_+y)"), tp)
+    assert "move the part" in _fix(report("near a singularity"), tp)
