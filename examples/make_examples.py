@@ -70,20 +70,19 @@ planar = true
 # Critical: the surfaces facing up (dome top, plate rim, cavity floor; 35 deg keeps the
 # dome top one patch) and those facing down (bottom face, cavity ceiling).
 # Edge length: the paper's tet count (197.5 k); 1.2 mm would give ~0.55 M tets.
-# Layer height: model height / layer count. That gives 14 layers here, not 24: the layers
-# above the cavity follow the dome (a 3-9 mm shell), and their H reaches 3 mm, beyond the
-# extrusion profile's range (virtual print surface error 0.42 mm). 0.70 mm gives the paper's
-# 24 layers and 0.24-0.25 mm, but its thin dome layers lean the nozzle 46-50 deg at the
-# dome's edge, where the bundled cell's tank walls stand in the way. The shallow tray of
-# planner/cells/tray.toml (mesp plan DIR --cell planner/cells/tray.toml) takes those leans:
-# there 3 of 5 fresh tet meshes plan (as planned 0.27-0.30 mm: the arm slows down on the
-# dome's stripe layers); the other two each have one step of a dome-edge stripe that no
-# nozzle orientation can follow within alpha [70, 110]. 0.85 mm: 2 of 3 (README).
+# Layer height: 0.70 mm, the paper's 24 layers. Model height / 24 = 1.15 mm gives 14 here:
+# the layers above the cavity follow the dome (a 3-9 mm shell) and their H reaches 3 mm,
+# beyond the extrusion profile's range (virtual print surface error 0.42 mm against 0.24-0.25
+# at 0.70 mm). The thin dome layers lean the nozzle 46-50 deg at the dome's edge, where the
+# bundled cell's 260 mm tank walls stand in the way: this job is planned for the shallow tray
+# of planner/cells/tray.toml (examples/cells.toml; mesp demo --example membrane uses it).
+# There the arm slows down on the dome's stripe layers (87-90 % of the extruding steps within
+# 5 % of their speed); the cell scales the extruder's rate with it (README).
 [mesh]
 edge_length_mm = 1.7
 
 [slicing]
-layer_height_mm = 1.15
+layer_height_mm = 0.70
 critical = ["bottom:30", "top:35"]
 """,
     "cube": """\

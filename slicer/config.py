@@ -170,6 +170,7 @@ class ToolpathConfig:
     first_layer_beta: float = 0.0
     boundary_distance: Literal["eikonal", "heat"] = "eikonal"
     measure_baselines: bool = True
+    max_step_elevation_deg: float = 20.0
 
     def __post_init__(self) -> None:
         if self.boundary_distance not in ("eikonal", "heat"):
@@ -188,6 +189,8 @@ class ToolpathConfig:
             raise ValueError("min_path_length_mm must be >= 0")
         if self.first_layer_beta != 0.0 and not 0.3 <= self.first_layer_beta <= 1.0:
             raise ValueError("first_layer_beta must be 0 (the profile's beta) or in [0.3, 1]")
+        if not 0.0 <= self.max_step_elevation_deg <= 60.0:
+            raise ValueError("max_step_elevation_deg must be 0 (off) or up to 60 (deg)")
 
 
 @dataclass(frozen=True)

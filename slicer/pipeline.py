@@ -206,6 +206,12 @@ def _toolpath(
         # do not bulge out of the model; the deposited ink is unchanged
         toolpath, flushed = flush_toolpath(toolpath, tetmesh, profile)
         report["flush"] = flushed.as_dict()
+    if job.toolpath.max_step_elevation_deg > 0:
+        from slicer.toolpath.relief import relieve_bends
+
+        # no nozzle angle within alpha [70, 110] follows a path that bends out of its layer
+        toolpath, relief = relieve_bends(toolpath, job.toolpath.max_step_elevation_deg)
+        report["bend_relief"] = relief.as_dict()
     toolpath.save(out_dir)
     export_layers_txt(toolpath, out_dir / "layers_txt")
     write_toolpath_figures(result, layers, out_dir / "figures")

@@ -4,7 +4,9 @@ Starts the simulated cell (launch/sim.toml: every node as its own process on the
 the MuJoCo twin of the UR5e and the emulated Modbus extruder), submits a bundled example,
 follows it through slicing, planning and printing (faster than real time), then runs the
 virtual print (`mesp inspect`) on the result and prints a summary. Everything lands in
-``--out`` (default ``out/demo``): the cell's state, logs and the job directory.
+``--out`` (default ``out/demo``): the cell's state, logs and the job directory. An example
+planned for another cell than the bundled one (``examples/cells.toml``: the membrane, a
+shallow tray) gets the twin started with that cell and the job planned for it.
 """
 
 from __future__ import annotations
@@ -13,8 +15,9 @@ import argparse
 import os
 import sys
 import time
+import tomllib
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from slicer.errors import InputError
 
@@ -48,13 +51,25 @@ def register(sub: Any) -> None:
     p.set_defaults(func=run)
 
 
-def _example(name: str) -> tuple[Path, Path | None]:
+class Example(NamedTuple):
+    """A bundled example: model file, job TOML (None: the defaults) and the cell TOML it is
+    planned for (None: the bundled cell; ``examples/cells.toml`` names the others)."""
+
+    model: Path
+    job: Path | None
+    cell: Path | None
+
+
+def _example(name: str) -> Example:
     models = sorted(p for p in EXAMPLES.glob(f"{name}.*") if p.suffix in {".stl", ".ply", ".obj"})
     if not models:
         known = sorted({p.stem for p in EXAMPLES.glob("*.stl")})
         raise InputError(f"no bundled example '{name}'", f"choose one of {', '.join(known)}")
     job = EXAMPLES / f"{name}.toml"
-    return models[0], job if job.is_file() else None
+    cells = EXAMPLES / "cells.toml"
+    cell_name = tomllib.loads(cells.read_text()).get(name) if cells.is_file() else None
+    cell = EXAMPLES.parent / cell_name if cell_name else None
+    return Example(models[0], job if job.is_file() else None, cell)
 
 
 def run(args: argparse.Namespace) -> int:
@@ -63,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.time_scale <= 0:
         raise InputError(f"--time-scale {args.time_scale}", "give a positive factor, e.g. 40")
-    model, job_file = _example(args.example)
+    model, job_file, cell_file = _example(args.example)
     home = args.out.resolve()
     home.mkdir(parents=True, exist_ok=True)
     os.environ["MESP_HOME"] = str(home)  # the cell's job store, logs and job dirs stay here
@@ -71,14 +86,19 @@ def run(args: argparse.Namespace) -> int:
     say.line(f"mesp demo: {model.name} on the simulated cell (state in {home})")
     t0 = time.monotonic()
     try:
-        cell = start_cell(overrides={"time_scale": args.time_scale}, on_event=say.event)
+        # the twin models the cell the job is planned for
+        overrides: dict[str, Any] = {"time_scale": args.time_scale}
+        if cell_file is not None:
+            overrides["cell_file"] = str(cell_file)
+            say.line(f"cell: {cell_file.relative_to(EXAMPLES.parent)} (examples/cells.toml)")
+        cell = start_cell(overrides=overrides, on_event=say.event)
     except LaunchFailed as exc:
         raise InputError(str(exc), exc.fix) from exc
     with cell:
         say.line(f"cell up in {time.monotonic() - t0:.1f} s: {', '.join(sorted(cell.alive))}")
         client = cell.client()
         try:
-            job = client.submit(model, job_file=job_file)
+            job = client.submit(model, job_file=job_file, cell_file=cell_file)
             say.line(f"submitted job {job.id}")
             try:
                 done = client.wait(job.id, on_progress=say.progress, timeout=args.timeout,

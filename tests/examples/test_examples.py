@@ -83,3 +83,23 @@ def test_socket_rim_is_a_saddle() -> None:
     along_x = high[np.abs(high[:, 0]) > np.abs(high[:, 1])][:, 2].max()
     along_y = high[np.abs(high[:, 1]) > np.abs(high[:, 0])][:, 2].max()
     assert along_x - along_y == pytest.approx(20.0, abs=0.5)
+
+
+def test_the_membrane_is_planned_in_the_tray_and_the_others_in_the_bundled_cell() -> None:
+    from mesp_cell.commands.demo import _example
+    from planner.cell import load_cell
+
+    ex = _example("membrane")
+    assert ex.cell is not None and ex.cell.is_file()
+    tray, bundled = load_cell(ex.cell), load_cell()
+    # only the tank changes: the same arm, tool and limits plan for it
+    assert tray.tank.inner_size_mm[2] < 0.4 * bundled.tank.inner_size_mm[2]
+    assert tray.tool == bundled.tool and tray.robot == bundled.robot
+    # deep enough for the part: 28 mm, lifted by the placement, under the gel cover
+    height = 28.0 + bundled.placement.offset_mm[2] + bundled.tank.gel_cover_mm
+    assert tray.tank.gel_fill_mm >= height
+    assert ex.job is not None
+    assert load_job(ex.job).slicing.layer_height_mm == pytest.approx(0.70)
+    for name in NAMES:
+        if name != "membrane":
+            assert _example(name).cell is None, name

@@ -68,6 +68,7 @@ def test_slice_writes_every_stage_and_design_report_keys(cube_job: Path) -> None
             "volume_error",
             "width_error",
             "width_error_undeformed",
+            "bend_relief",
             "width_error_poisson_stripe",
         ],
         "timing_s": ["load", "tetrahedralize", "slicing", "toolpath", "total"],
