@@ -70,19 +70,22 @@ planar = true
 # Critical: the surfaces facing up (dome top, plate rim, cavity floor; 35 deg keeps the
 # dome top one patch) and those facing down (bottom face, cavity ceiling).
 # Edge length: the paper's tet count (197.5 k); 1.2 mm would give ~0.55 M tets.
-# Layer height: 0.70 mm, the paper's 24 layers. Model height / 24 = 1.15 mm gives 14 here:
-# the layers above the cavity follow the dome (a 3-9 mm shell) and their H reaches 3 mm,
-# beyond the extrusion profile's range (virtual print surface error 0.42 mm against 0.24-0.25
-# at 0.70 mm). The thin dome layers lean the nozzle 46-50 deg at the dome's edge, where the
-# bundled cell's 260 mm tank walls stand in the way: this job is planned for the shallow tray
-# of planner/cells/tray.toml (examples/cells.toml; mesp demo --example membrane uses it).
-# There the arm slows down on the dome's stripe layers (87-90 % of the extruding steps within
-# 5 % of their speed); the cell scales the extruder's rate with it (README).
+# Layer height: 0.62 mm, 27 layers, which keeps H within the extrusion profile's range (up to
+# 1.67 mm against the profile's 1.65). Model height / 24 (the paper's count) = 1.15 mm gives 14
+# here: the layers above the cavity follow the dome (a 3-9 mm shell) and their H reached 3 mm
+# (virtual print surface error 0.42 mm); 0.70 mm gives 23-24 layers with H up to 1.9 mm, and
+# where that thick dome layer is a contour layer its width error p90 reaches 13-20 % (surface
+# error as planned 0.24-0.26 mm); 0.62 mm: 0.21-0.22 mm. The thin dome layers lean the nozzle
+# 46-50 deg at the dome's edge, where the bundled cell's 260 mm tank walls stand in the way:
+# this job is planned for the shallow tray of planner/cells/tray.toml (examples/cells.toml;
+# mesp demo --example membrane uses it). There the arm slows down on the dome's stripe layers
+# (85-87 % of the extruding steps within 5 % of their speed) and the cell scales the
+# extruder's rate with it (README).
 [mesh]
 edge_length_mm = 1.7
 
 [slicing]
-layer_height_mm = 0.70
+layer_height_mm = 0.62
 critical = ["bottom:30", "top:35"]
 """,
     "cube": """\

@@ -326,9 +326,10 @@ def plan(
         if placement is None:
             placement = choose_placement(reach, toolpath)
     result = _plan_placed(toolpath, reach, placement, timer, repaired, smoothed)
-    if searched and _blocked(result):
-        # the entry or exit depends on where the job starts and ends, which the placement
-        # score does not see: re-plan at the search's other reaching placements
+    if searched and _refused(result):
+        # the entry or exit depends on where the job starts and ends, and the placement score
+        # checks only a sample of the waypoints (a lone one at a steep edge can be out of
+        # reach): re-plan at the search's other reaching placements
         box = bbox(toolpath)
         tries = 0
         for x, y, yaw, clear in placement.alternatives[:REPLANS]:
@@ -339,16 +340,18 @@ def plan(
             again = _plan_placed(toolpath, reach, alt, timer, repaired, smoothed,
                                  f" (yaw {yaw:g})")
             again.report["placement"]["replanned"] = tries
-            if not _blocked(again):
+            if not _refused(again):
                 return again
         result.report["placement"]["replanned"] = tries
     return result
 
 
-def _blocked(result: PlanResult) -> bool:
-    """The entry into or the exit out of the gel cannot be executed."""
+def _refused(result: PlanResult) -> bool:
+    """The entry into or the exit out of the gel cannot be executed, or some waypoint is
+    unreachable."""
     return bool(result.report["entry"]["status"] != "ok"
-                or result.report["exit"]["status"] != "ok")
+                or result.report["exit"]["status"] != "ok"
+                or result.report["unreachable"]["count"] > 0)
 
 
 def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: StageTimer,

@@ -99,7 +99,7 @@ def test_the_membrane_is_planned_in_the_tray_and_the_others_in_the_bundled_cell(
     height = 28.0 + bundled.placement.offset_mm[2] + bundled.tank.gel_cover_mm
     assert tray.tank.gel_fill_mm >= height
     assert ex.job is not None
-    assert load_job(ex.job).slicing.layer_height_mm == pytest.approx(0.70)
+    assert load_job(ex.job).slicing.layer_height_mm == pytest.approx(0.62)
     for name in NAMES:
         if name != "membrane":
             assert _example(name).cell is None, name

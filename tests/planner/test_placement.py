@@ -115,3 +115,30 @@ def test_a_blocked_entry_is_replanned_at_another_yaw(cell: CellConfig) -> None:
     assert result.report["entry"]["status"] == "ok" and result.report["exit"]["status"] == "ok"
     assert result.report["placement"]["replanned"] >= 1
     assert result.placement.yaw_deg != searched.yaw_deg
+
+
+def test_an_unreachable_waypoint_is_replanned_at_another_placement(
+        cell: CellConfig, monkeypatch: pytest.MonkeyPatch) -> None:
+    # the placement score checks a sample of the waypoints: where the plan then finds one out
+    # of reach (a lone waypoint at a steep edge), the next of the search's placements is tried
+    import planner.plan as plan_module
+
+    tp = synthetic.rings(45.0, [0.0, 30.0], [0.0, 0.0], step=2.0)
+    first = plan(tp, cell)
+    assert first.status == "ok" and "replanned" not in first.report["placement"]
+    real = plan_module._plan_placed
+    yaws: list[float] = []
+
+    def first_one_refused(*args: object, **kwargs: object) -> object:
+        result = real(*args, **kwargs)  # type: ignore[arg-type]
+        yaws.append(result.placement.yaw_deg)
+        if len(yaws) == 1:  # as if one waypoint were out of reach there
+            result.report["unreachable"]["count"] = 1
+        return result
+
+    monkeypatch.setattr(plan_module, "_plan_placed", first_one_refused)
+    result = plan(tp, cell)
+    assert len(yaws) == 2 and yaws[1] != yaws[0]
+    assert result.report["unreachable"]["count"] == 0
+    assert result.report["placement"]["replanned"] == 1
+    assert result.placement.yaw_deg == yaws[1]
