@@ -94,16 +94,17 @@ def segment_speeds(toolpath: Toolpath, trajectory: Timed) -> PlannedSpeeds:
 
 
 
-def knot_flow_scale(toolpath: Toolpath, trajectory: Timed) -> NDArray[np.float64]:
+def knot_flow_scale(toolpath: Toolpath, trajectory: Timed,
+                    planned: PlannedSpeeds | None = None) -> NDArray[np.float64]:
     """(M,) float64 in [MIN_FLOW_SCALE, 1], per trajectory sample, the extrusion rate over C
     that keeps the ink per millimetre on the step after it: the ``PlannedSpeeds.ratio`` of the
-    toolpath segment the step belongs to; 1 on steps that do not deposit and before the first
-    waypoint.
+    toolpath segment the step belongs to (``planned``, or computed); 1 on steps that do not
+    deposit and before the first waypoint.
 
     Raises:
         InputError: the trajectory was not planned for this toolpath.
     """
-    ratio = segment_speeds(toolpath, trajectory).ratio
+    ratio = (planned if planned is not None else segment_speeds(toolpath, trajectory)).ratio
     wp = np.asarray(trajectory.waypoint, dtype=np.int64)
     # the toolpath segment a step lies on: the last waypoint passed at or before its sample
     passed = np.maximum.accumulate(np.where(wp >= 0, wp, -1))

@@ -75,7 +75,7 @@ def synced_segment_ink(toolpath: Toolpath, trajectory: Trajectory, planned: Plan
     first-order response ``tau_s``, integrated between the samples of the segment's two
     waypoints. Segments with zero duration get none."""
     t = np.asarray(trajectory.t, dtype=np.float64)
-    scale = knot_flow_scale(toolpath, trajectory)
+    scale = knot_flow_scale(toolpath, trajectory, planned)
     step = max(FLOW_DT_S, (t[-1] - t[0]) / FLOW_STEPS_MAX)
     grid = np.arange(t[0], t[-1] + step, step)
     # the command at time s is the scale of the step being moved at s + lead

@@ -17,8 +17,8 @@ label-correcting loop (``_solve``): a queue of vertices seeded with the sources;
 updates the corners opposite each edge it ends, and a corner whose distance falls by more than
 the tolerance joins the queue. The update is monotone, so the order of the updates does not
 change the fixed point, only how many it takes; Jacobi passes over all triangles from
-Dijkstra's graph distance (the vectorised solver before session 14, ``triangle_update``) reach
-the same distances to 1e-6 mm, in 10-20 x the time.
+Dijkstra's graph distance (the vectorised solver before session 14; ``triangle_update`` gives
+one pass's candidates) reach the same distances to 1e-6 mm, in 10-20 x the time.
 
 Where two fronts meet (the medial axis, a disc's centre) the distance has a kink that the
 linear interpolation along an edge cuts, so there it falls short by up to about half an edge.
@@ -59,52 +59,6 @@ class EikonalResult(NamedTuple):
     converged: bool
 
 
-class _Corners(NamedTuple):
-    """The geometry of every triangle rotation (a, b, c), r = k * m + face, all (3m,).
-
-    a, b, c: int64 vertex ids; ee = |b - a|^2, p = (a - c) . (b - a), q = |a - c|^2 (mm^2);
-    bc = |b - c| (mm). The update needs nothing else: |a + l (b - a) - c|^2 = q + 2 l p +
-    l^2 ee.
-    """
-
-    a: NDArray[np.int64]
-    b: NDArray[np.int64]
-    c: NDArray[np.int64]
-    ee: NDArray[np.float64]
-    p: NDArray[np.float64]
-    q: NDArray[np.float64]
-    bc: NDArray[np.float64]
-
-
-def _corners(v: NDArray[np.float64], f: NDArray[np.int64]) -> _Corners:
-    a = np.concatenate([f[:, k] for k in range(3)])
-    b = np.concatenate([f[:, (k + 1) % 3] for k in range(3)])
-    c = np.concatenate([f[:, (k + 2) % 3] for k in range(3)])
-    d0 = v[a] - v[c]
-    e = v[b] - v[a]
-    return _Corners(a, b, c, np.einsum("ij,ij->i", e, e), np.einsum("ij,ij->i", d0, e),
-                    np.einsum("ij,ij->i", d0, d0), np.linalg.norm(v[b] - v[c], axis=1))
-
-
-def _update(g: _Corners, r: NDArray[np.int64], t: NDArray[np.float64]
-            ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """Candidates for the corners c of the rotations ``r`` (see ``triangle_update``)."""
-    ta, tb = t[g.a[r]], t[g.b[r]]
-    ee, p, q = g.ee[r], g.p[r], g.q[r]
-    finite = np.isfinite(ta) & np.isfinite(tb)
-    dt = np.where(finite, np.where(finite, tb, 0.0) - np.where(finite, ta, 0.0), 0.0)
-    cross = np.maximum(ee * q - p * p, 0.0)
-    room = ee - dt * dt
-    inner = room > tol.zero * np.maximum(ee, tol.zero)
-    lam = np.where(inner, (-p - dt * np.sqrt(cross / np.where(inner, room, 1.0)))
-                   / np.maximum(ee, tol.zero), np.where(dt > 0.0, 0.0, 1.0))
-    lam = np.clip(lam, 0.0, 1.0)
-    val = ta + lam * dt + np.sqrt(np.maximum(q + 2.0 * lam * p + lam * lam * ee, 0.0))
-    # one corner still unknown (inf): reach c along the edge from the known one
-    edge = np.minimum(ta + np.sqrt(q), tb + g.bc[r])
-    return np.where(finite, val, edge), g.c[r]
-
-
 def triangle_update(v: NDArray[np.float64], f: NDArray[np.int64], t: NDArray[np.float64]
                     ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """Candidate distances of each triangle's corners from their opposite edges.
@@ -114,11 +68,28 @@ def triangle_update(v: NDArray[np.float64], f: NDArray[np.int64], t: NDArray[np.
     point is l* = (-p - dt sqrt(|e x d0|^2 / (|e|^2 - dt^2))) / |e|^2 with d0 = a - c,
     e = b - a, p = d0 . e, dt = t_b - t_a (when |dt| >= |e| the minimum is at an end).
 
-    Returns ((3m,) float64 mm candidates, (3m,) int64 the corner each is for).
+    A corner whose edge has an unknown (inf) end is reached along the edge from the known one.
+    Returns ((3m,) float64 mm candidates, (3m,) int64 the corner each is for), rotation k of
+    face i at k m + i.
     """
-    f64 = np.asarray(f, dtype=np.int64)
-    return _update(_corners(np.asarray(v, dtype=np.float64), f64),
-                   np.arange(3 * len(f64), dtype=np.int64), t)
+    out: tuple[NDArray[np.float64], NDArray[np.int64]] = _triangle_candidates(
+        np.ascontiguousarray(v, dtype=np.float64), np.ascontiguousarray(f, dtype=np.int64),
+        np.asarray(t, dtype=np.float64))
+    return out
+
+
+@njit(cache=True)
+def _triangle_candidates(v: NDArray[np.float64], f: NDArray[np.int64], t: NDArray[np.float64]
+                         ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    m = len(f)
+    cand = np.empty(3 * m)
+    ids = np.empty(3 * m, dtype=np.int64)
+    for k in range(3):
+        for i in range(m):
+            a, b, c = f[i, k], f[i, (k + 1) % 3], f[i, (k + 2) % 3]
+            cand[k * m + i] = _via_edge(v, a, b, c, t[a], t[b])
+            ids[k * m + i] = c
+    return cand, ids
 
 
 def eikonal_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
@@ -143,8 +114,19 @@ def eikonal_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer],
 
 
 @njit(cache=True)
+def _via_edge(v: NDArray[np.float64], a: int, b: int, c: int, ta: float, tb: float) -> float:
+    """The distance of corner c through the edge a-b whose ends are at ``ta``, ``tb``
+    (``triangle_update``): ee = |b - a|^2, p = (a - c) . (b - a), q = |a - c|^2, bc = |b - c|."""
+    ex, ey, ez = v[b, 0] - v[a, 0], v[b, 1] - v[a, 1], v[b, 2] - v[a, 2]
+    dx, dy, dz = v[a, 0] - v[c, 0], v[a, 1] - v[c, 1], v[a, 2] - v[c, 2]
+    fx, fy, fz = v[b, 0] - v[c, 0], v[b, 1] - v[c, 1], v[b, 2] - v[c, 2]
+    return _candidate(ta, tb, ex * ex + ey * ey + ez * ez, dx * ex + dy * ey + dz * ez,
+                      dx * dx + dy * dy + dz * dz, np.sqrt(fx * fx + fy * fy + fz * fz))
+
+
+@njit(cache=True)
 def _candidate(ta: float, tb: float, ee: float, p: float, q: float, bc: float) -> float:
-    """``_update`` for one rotation: the distance of c through the edge a-b."""
+    """The minimum over l in [0, 1] of ta + l (tb - ta) + |a + l (b - a) - c| (module doc)."""
     if not (np.isfinite(ta) and np.isfinite(tb)):
         return min(ta + np.sqrt(q), tb + bc)
     dt = tb - ta
@@ -214,15 +196,7 @@ def _solve(v: NDArray[np.float64], f: NDArray[np.int64], is_src: NDArray[np.bool
                 c, o = (y, z) if turn == 0 else (z, y)
                 if is_src[c]:
                     continue
-                # c through the edge x-o
-                ex, ey, ez = v[o, 0] - v[x, 0], v[o, 1] - v[x, 1], v[o, 2] - v[x, 2]
-                dx, dy, dz = v[x, 0] - v[c, 0], v[x, 1] - v[c, 1], v[x, 2] - v[c, 2]
-                ee = ex * ex + ey * ey + ez * ez
-                p = dx * ex + dy * ey + dz * ez
-                q = dx * dx + dy * dy + dz * dz
-                ox, oy, oz = v[o, 0] - v[c, 0], v[o, 1] - v[c, 1], v[o, 2] - v[c, 2]
-                bc = np.sqrt(ox * ox + oy * oy + oz * oz)
-                cand = _candidate(t[x], t[o], ee, p, q, bc)
+                cand = _via_edge(v, x, o, c, t[x], t[o])  # c through the edge x-o
                 if cand < t[c]:
                     fell = t[c] - cand
                     t[c] = cand
