@@ -252,14 +252,18 @@ def _reason_text(reach: Reach, code: int) -> str:
     return REASONS.get(code, "unknown")
 
 
+# what to do where no nozzle angle follows the path (ALPHA), here and in `mesp plan`
+BEND_FIX = ("the path bends too sharply against its layer for any nozzle angle within "
+            "[planning] alpha_min_deg..alpha_max_deg: re-slice with another --layer-height "
+            "or --edge-length")
+
+
 def _fix_text(reach: Reach, code: int) -> str:
     """What the user can change in the cell TOML for a failure of this kind."""
     name = reach.collision.names[code - 100] if code >= 100 else ""
     if code == ALPHA:
         # no placement changes the angle between the path and its own layer
-        return ("the path bends too sharply against its layer there for any nozzle angle "
-                "within [planning] alpha_min_deg..alpha_max_deg: re-slice with another "
-                "--layer-height or --edge-length")
+        return f"there {BEND_FIX}"
     if "tank_wall" in name:
         return ("use a wider tank ([tank] inner_size_mm), a longer nozzle ([tool] "
                 "nozzle_length_mm, tip_xyz_mm) or a smaller model; for a flat part the "

@@ -117,9 +117,9 @@ def _fix(report: dict[str, Any], toolpath: Any) -> str:
     x, y, z = (float(c) for c in toolpath.position[i])
     where = f"waypoint {i} (layer {int(toolpath.layer[i])}, at {x:.1f}, {y:.1f}, {z:.1f} mm)"
     if reason.startswith("printing angle"):
-        return (f"at {where} the path bends too sharply against its layer for any nozzle "
-                "angle within the cell's alpha range: re-slice with another --layer-height or "
-                "--edge-length")
+        from planner.placement import BEND_FIX
+
+        return f"at {where} {BEND_FIX}"
     if "tank_wall" in reason:
         return (f"at {where} the tool reaches the tank wall: move the part, or for a flat part "
                 "plan for the shallow tray (--cell planner/cells/tray.toml)")

@@ -112,8 +112,7 @@ def relieve_bends(toolpath: Toolpath, max_elevation_deg: float = 20.0, cap: floa
         target = p[i - 1] + w * (p[i + 1] - p[i - 1])
         want = np.einsum("ij,ij->i", target - p[i], n[i])
         room = budget[i] - np.abs(total[i])
-        step = np.clip(want, -room, room)
-        step = np.where(np.abs(total[i] + step) <= budget[i] + tol.zero, step, 0.0)
+        step = np.clip(want, -room, room)  # |total + step| <= budget
         if not np.any(np.abs(step) > tol.zero):
             break
         p[i] += step[:, None] * n[i]
