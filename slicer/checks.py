@@ -13,6 +13,38 @@ from typing import Any
 HEIGHT_OUT_OF_PROFILE = 0.01
 # |deposited / model volume - 1| above which the job is flagged (issue 3's 2 %).
 VOLUME_ERROR = 0.02
+# Area share of a layer left bare or covered twice above which the job is flagged (issue 21).
+COVERAGE_LIMIT = {"contour": 0.03, "stripe": 0.05}
+
+
+def _downward_fix(report: Mapping[str, Any]) -> str:
+    """The fix for downward printing directions, from the critical selectors used."""
+    selectors = report.get("job", {}).get("config", {}).get("slicing", {}).get("critical", [])
+    bottoms = [s for s in selectors if str(s).startswith("bottom")]
+    if len(selectors) > 1 and bottoms:
+        return (f"fix: keep only the bottom critical surface (--critical {bottoms[0]}): a second "
+                "region the layers must also lie on folds them between the two")
+    return ("fix: rotate the model so the part grows upward from its largest flat face, or "
+            "name that face with --critical")
+
+
+def critical_line(report: Mapping[str, Any]) -> str | None:
+    """One line naming the critical regions the slice used (selector, count, areas), or None
+    before slicing."""
+    regions = report.get("slicing", {}).get("critical_regions")
+    if regions is None:
+        return None
+    if not regions:
+        return "critical surfaces: none (the layers follow the part's height)"
+    by_selector: dict[str, list[float]] = {}
+    for r in regions:
+        by_selector.setdefault(str(r["selector"]), []).append(float(r["area_mm2"]))
+    parts = []
+    for sel, areas in by_selector.items():
+        shown = ", ".join(f"{a:.0f}" for a in areas[:4])
+        more = f" +{len(areas) - 4} more" if len(areas) > 4 else ""
+        parts.append(f"{sel}: {len(areas)} region(s) of {shown}{more} mm^2")
+    return "critical surfaces: " + "; ".join(parts)
 
 
 def job_notes(report: Mapping[str, Any]) -> list[str]:
@@ -43,6 +75,21 @@ def job_notes(report: Mapping[str, Any]) -> list[str]:
         reasons = "; ".join(failed.get("reasons", [])[:3])
         notes.append(f"toolpath: {failed['count']} layer component(s) skipped ({reasons}); "
                      "fix: a finer tet mesh (--edge-length) usually repairs degenerate layers")
+    direction = toolpath.get("printing_direction", {})
+    if direction.get("downward", 0):
+        notes.append(
+            f"toolpath: {direction['downward']} extruding waypoints print downward (up to "
+            f"{direction['max_from_up_deg']:.0f} deg from up; layers "
+            f"{', '.join(map(str, direction['downward_layers']))}): no cell can print them; "
+            + _downward_fix(report))
+    for name in ("contour", "stripe"):
+        cov = toolpath.get("coverage", {}).get(name, {})
+        if cov.get("gap") is not None and (cov["gap"] > COVERAGE_LIMIT[name]
+                                           or cov["overlap"] > COVERAGE_LIMIT[name]):
+            notes.append(
+                f"toolpath: {name} layers leave {100 * cov['gap']:.1f}% of their area bare and "
+                f"cover {100 * cov['overlap']:.1f}% twice (limit "
+                f"{100 * COVERAGE_LIMIT[name]:.0f}% each); see toolpath.coverage.per_layer")
     error = toolpath.get("volume_error")
     if error is not None and abs(float(error)) > VOLUME_ERROR:
         notes.append(f"toolpath: deposited volume is {100 * float(error):+.1f}% off the model's "

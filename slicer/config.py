@@ -34,12 +34,17 @@ class CriticalSelector:
         where: ((axis 0-2, "<" or ">", value mm), ...): conditions on the area-weighted
             centre of each patch, in the model's frame (mm, as in model.ply); e.g.
             ``bottom:30@z<1`` keeps the bottom face but not a cavity's ceiling.
+        at_end: ``@end``: only the patches that reach the part's end along the cone's axis
+            (its lowest point for a bottom, its highest for a top; within ``END_TOLERANCE``
+            of the part's extent along the axis): the face a user would call the bottom,
+            not every downward-facing bump of a scan.
     """
 
     direction: tuple[float, float, float]
     cone_deg: float
     text: str
     where: tuple[tuple[int, str, float], ...] = ()
+    at_end: bool = False
 
     def accepts(self, centre: np.ndarray) -> bool:
         """True if the point ``centre`` (3,) mm meets every ``where`` condition."""
@@ -51,10 +56,11 @@ class CriticalSelector:
         """Parse ``bottom[:DEG]``, ``top[:DEG]`` or ``normal:X,Y,Z[:DEG]`` (default 45 deg),
         each optionally followed by position conditions ``@z<MM``, ``@x>MM``, ..."""
         fix = ("write bottom[:DEG], top[:DEG] or normal:X,Y,Z[:DEG], optionally with @z<MM "
-               "(or @x, @y, >), e.g. top:30 or bottom:30@z<1")
+               "(or @x, @y, >) or @end, e.g. top:30, bottom:30@z<1 or bottom:45@end")
         head, *conditions = text.strip().split("@")
         where = []
-        for cond in conditions:
+        at_end = any(c.strip() == "end" for c in conditions)
+        for cond in (c for c in conditions if c.strip() != "end"):
             found = _WHERE.match(cond.strip())
             if found is None:
                 raise InputError(f"critical selector '{text}': condition '@{cond}' is not "
@@ -83,7 +89,7 @@ class CriticalSelector:
         if not 0.0 < cone < 90.0:
             raise InputError(f"critical selector '{text}': cone {cone} deg", "use 0 < DEG < 90")
         return CriticalSelector(direction=axis, cone_deg=cone, text=text.strip(),
-                                where=tuple(where))
+                                where=tuple(where), at_end=at_end)
 
 
 @dataclass(frozen=True)
@@ -91,10 +97,14 @@ class ModelConfig:
     units: Literal["mm", "cm", "m", "in"] = "mm"
     max_size_mm: float = 2000.0
     min_size_mm: float = 1.0
+    scale_to_mm: float = 0.0
 
     def __post_init__(self) -> None:
         if not 0 < self.min_size_mm < self.max_size_mm:
             raise ValueError("need 0 < min_size_mm < max_size_mm")
+        if not (self.scale_to_mm == 0.0
+                or self.min_size_mm <= self.scale_to_mm <= self.max_size_mm):
+            raise ValueError("scale_to_mm must be 0 (off) or within [min_size_mm, max_size_mm]")
 
     @property
     def scale_mm(self) -> float:
@@ -130,7 +140,7 @@ class MeshConfig:
 @dataclass(frozen=True)
 class SlicingConfig:
     layer_height_mm: float = 0.6
-    critical: tuple[str, ...] = ("bottom:45",)
+    critical: tuple[str, ...] = ("bottom:45@end",)
     planar: bool = False
     max_iterations: int = 30
     convergence: float = 1e-2

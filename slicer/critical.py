@@ -22,6 +22,9 @@ from slicer.config import CriticalSelector
 from slicer.operators import TetOperators
 
 MIN_REGION_FACES = 3
+# ``@end``: a patch reaches the part's end along the cone's axis when its furthest vertex
+# lies within this fraction of the part's extent along the axis from the part's furthest.
+END_TOLERANCE = 0.02
 
 
 class CriticalRegion(NamedTuple):
@@ -119,6 +122,9 @@ def select_critical_regions(
         found: list[CriticalRegion] = []
         dropped = 0
         elsewhere = 0
+        not_end: list[float] = []
+        along = ops.vertices @ axis
+        end_level = float(along.max()) - END_TOLERANCE * float(np.ptp(along))
         for lab in range(len(counts)):  # loop over patches, not faces
             idx = chosen[order[starts[lab]:starts[lab + 1]]]
             if len(idx) < min_faces:
@@ -126,6 +132,10 @@ def select_critical_regions(
                 continue
             normals = bnd.normal[idx]
             area = bnd.area[idx]
+            if sel.at_end and float(along[bnd.faces[idx]].max()) < end_level:
+                not_end.append(float(area.sum()))
+                taken[idx] = False
+                continue
             if sel.where:
                 centre = (ops.vertices[bnd.faces[idx]].mean(axis=1) * area[:, None]).sum(
                     axis=0) / max(float(area.sum()), 1e-300)
@@ -154,7 +164,10 @@ def select_critical_regions(
         if elsewhere:
             notes.append(f"critical selector '{sel.text}': left out {elsewhere} patch(es) "
                          "outside its @ conditions")
-        if sel.where and not found:
+        if not_end:
+            notes.append(f"critical selector '{sel.text}': left out {len(not_end)} patch(es) "
+                         f"({sum(not_end):.0f} mm^2) away from the part's end along its axis")
+        if (sel.where or sel.at_end) and not found:
             notes.append(f"critical selector '{sel.text}' kept no patch")
         found.sort(key=lambda r: -r.area)
         regions.extend(found)

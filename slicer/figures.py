@@ -16,14 +16,16 @@ from slicer.stages import Layers
 
 
 def height_histogram(
-    initial: np.ndarray, final: np.ndarray, weights: np.ndarray, target: float, path: Path
+    initial: np.ndarray, initial_weights: np.ndarray, final: np.ndarray,
+    final_weights: np.ndarray, target: float, path: Path
 ) -> Path:
-    """Histogram of layer height, initial (harmonic) vs final field.
+    """Histogram of layer height on the layers, initial (harmonic) vs final field.
 
     Args:
-        initial: (T,) float64, mm, per-tet layer height of the initial field.
-        final: (T,) float64, mm, per-tet layer height of the final field.
-        weights: (T,) float64, mm^3, tet volumes.
+        initial: (m0,) float64, mm, layer height per face of the initial field's layers.
+        initial_weights: (m0,) float64, mm^2, their areas.
+        final: (m,) float64, mm, layer height per face of the final layers.
+        final_weights: (m,) float64, mm^2, their areas.
         target: float, mm, target layer height.
         path: output PNG.
     """
@@ -31,17 +33,18 @@ def height_histogram(
     # Statistics of the true values; the drawing range follows the final field (with room
     # either side), since the harmonic baseline can have a very long tail.
     labels = []
-    for values in (initial, final):
+    for values, weights in ((initial, initial_weights), (final, final_weights)):
         mean = np.average(values, weights=weights)
         labels.append(np.sqrt(np.average((values - mean) ** 2, weights=weights)))
     lo, hi = np.percentile(final, [0.5, 99.5])
     lo, hi = max(0.0, lo - 2.0 * (hi - lo) - 0.1 * target), hi + 2.0 * (hi - lo) + 0.1 * target
     bins = np.linspace(lo, hi, 60)
     series = (
-        (np.clip(initial, lo, hi), f"initial (harmonic): std {labels[0]:.3f} mm", "tab:grey"),
-        (final, f"final: std {labels[1]:.3f} mm", "tab:blue"),
+        (np.clip(initial, lo, hi), initial_weights,
+         f"initial (harmonic): std {labels[0]:.3f} mm", "tab:grey"),
+        (np.clip(final, lo, hi), final_weights, f"final: std {labels[1]:.3f} mm", "tab:blue"),
     )
-    for values, label, colour in series:
+    for values, weights, label, colour in series:
         ax.hist(
             values,
             bins=bins.tolist(),
@@ -52,7 +55,7 @@ def height_histogram(
         )
     ax.axvline(target, color="k", linestyle="--", linewidth=1, label=f"target {target:.2f} mm")
     ax.set_xlabel("layer height H (mm; values outside the axis are drawn at its ends)")
-    ax.set_ylabel("volume fraction")
+    ax.set_ylabel("fraction of the layer area")
     ax.set_title("Layer height distribution")
     ax.legend(fontsize=8)
     fig.tight_layout()

@@ -295,8 +295,11 @@ def load_surface(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
     if not np.all(np.isfinite(mesh.vertices)):
         raise InputError(f"{name} has NaN or infinite coordinates", "export the model again")
     mesh.apply_scale(config.scale_mm)
-    _check_size(mesh.vertices, name, config)
     notes: list[str] = []
+    factor = _scale_to(mesh.vertices, config, notes)
+    if factor != 1.0:
+        mesh.apply_scale(factor)
+    _check_size(mesh.vertices, name, config)
     mesh = _repair(mesh, name, notes)
     diagonal = float(np.linalg.norm(mesh.extents))
     tri = mesh.vertices[mesh.faces]
@@ -310,6 +313,20 @@ def load_surface(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
         mesh.invert()
         notes.append("all normals pointed inwards (negative volume): flipped every face")
     return Surface(vertices=mesh.vertices, faces=mesh.faces, source=path, notes=tuple(notes))
+
+
+def _scale_to(vertices: np.ndarray, config: ModelConfig, notes: list[str]) -> float:
+    """The uniform factor that makes the largest extent ``config.scale_to_mm`` (1 when off),
+    with a note saying what was done."""
+    if config.scale_to_mm <= 0:
+        return 1.0
+    size = float(np.max(vertices.max(axis=0) - vertices.min(axis=0)))
+    if not size > 0:
+        return 1.0  # a point or empty model: the size check refuses it
+    factor = config.scale_to_mm / size
+    notes.append(f"scaled by {factor:.4g} from {size:.4g} to {config.scale_to_mm:g} mm "
+                 "(largest extent)")
+    return factor
 
 
 def _check_size(vertices: np.ndarray, name: str, config: ModelConfig) -> None:
@@ -362,6 +379,7 @@ def load_tet_mesh(path: str | Path, units: str | ModelConfig = "mm") -> TetMesh:
     if points.ndim != 2 or points.shape[1] != 3:
         raise InputError(f"{path.name} does not have 3-D points", "give a 3-D tet mesh")
     vertices = points * config.scale_mm
+    vertices = vertices * _scale_to(vertices, config, [])
     tets = np.vstack(blocks).astype(np.int64)
     if tets.min() < 0 or tets.max() >= len(vertices):
         raise InputError(f"{path.name} has tets indexing missing points", "export it again")

@@ -126,8 +126,9 @@ def _slice(
 ) -> tuple[dict[str, Any], LayerExtraction]:
     """Field optimisation and layer extraction, their files, pictures and report section."""
     from slicer import field as field_mod
-    from slicer import figures
+    from slicer import figures, heights
     from slicer import layers as layers_mod
+    from slicer.extrusion import load_profile
     from slicer.layer_export import export_layers_ply
 
     result = field_mod.compute_field(tetmesh, job.slicing, progress=progress)
@@ -136,20 +137,19 @@ def _slice(
     extraction.layers.save(out_dir)
     export_layers_ply(extraction.layers, out_dir / "layers_ply")
 
-    # Per-tet heights for the histogram; the operators are reused, not rebuilt.
-    initial = field_mod.height_stats(result.operators, result.g0, job.slicing.layer_height_mm)
-    final = field_mod.height_stats(result.operators, result.g, job.slicing.layer_height_mm)
+    # Heights as printed: on the layers of the final field and, for the baseline, on the
+    # layers the initial (harmonic) field would give at the same target (slicer.heights).
+    final = heights.face_heights(extraction.layers)
+    initial = heights.face_heights(heights.initial_layers(result, job.slicing.layer_height_mm))
+    lo, hi = load_profile(job.extrusion.profile).layer_height_range
     fig_dir = out_dir / "figures"
     fig_dir.mkdir(exist_ok=True)
-    figures.height_histogram(
-        initial.per_tet,
-        final.per_tet,
-        initial.volume,
-        job.slicing.layer_height_mm,
-        fig_dir / "layer_height_histogram.png",
-    )
+    figures.height_histogram(initial.height, initial.area, final.height, final.area,
+                             job.slicing.layer_height_mm,
+                             fig_dir / "layer_height_histogram.png")
     figures.convergence(result.trace.o_align, result.trace.height_std, fig_dir / "convergence.png")
     figures.section_view(extraction.layers, fig_dir / "section.png")
+    final_stats, initial_stats = final.stats(), initial.stats()
 
     report = {
         "layers": extraction.layers.layer_count,
@@ -157,10 +157,13 @@ def _slice(
         "status": result.status,
         "planar": job.slicing.planar,
         "critical_regions": extraction.critical_report,
-        "height_mm": final.summary(),
+        "height_mm": final_stats.as_dict(),
         # Baseline: the scalar harmonic field with the region constraints (paper [42]).
-        "height_std_initial_mm": initial.summary()["std"],
-        "height_initial_mm": initial.summary(),
+        "height_std_initial_mm": initial_stats.std,
+        "height_initial_mm": initial_stats.as_dict(),
+        # layer area whose H the extrusion profile's table does not cover
+        "height_outside_profile": {**heights.outside_profile(final, lo, hi),
+                                   "profile_range_mm": [lo, hi]},
         # Where the iteration starts: the harmonic vector field of eq. 6 and its Poisson
         # solve, a much stronger start than the baseline; final vs start is the iteration's
         # own improvement.
@@ -190,6 +193,8 @@ def _toolpath(
     """Toolpath generation, its files, pictures and report section."""
     from slicer.extrusion import load_profile
     from slicer.toolpath.build import compute_toolpath
+    from slicer.toolpath.coverage import layer_coverage
+    from slicer.toolpath.directions import direction_report
     from slicer.toolpath.export import export_layers_txt
     from slicer.toolpath.figures import write_toolpath_figures
 
@@ -213,6 +218,12 @@ def _toolpath(
         toolpath, relief = relieve_bends(toolpath, job.toolpath.max_step_elevation_deg)
         report["bend_relief"] = relief.as_dict()
     toolpath.save(out_dir)
+    # what the toolpath leaves bare or covers twice (connectors included), and the printing
+    # directions the robot will have to follow
+    start = time.perf_counter()
+    report["coverage"] = layer_coverage(layers, toolpath).summary()
+    report["coverage"]["seconds"] = round(time.perf_counter() - start, 3)
+    report["printing_direction"] = direction_report(toolpath)
     export_layers_txt(toolpath, out_dir / "layers_txt")
     write_toolpath_figures(result, layers, out_dir / "figures")
     deposited = float(report["deposited_volume_mm3"])

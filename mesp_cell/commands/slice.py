@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from mesp_cell.console import ConsoleProgress
-from slicer.checks import job_notes
+from slicer.checks import critical_line, job_notes
 from slicer.config import JobConfig, load_job
 from slicer.errors import InputError
 
@@ -37,6 +37,8 @@ def register(sub: Any) -> None:
         "--job", type=Path, metavar="JOB.toml", help="job file (see slicer/defaults.toml)"
     )
     p.add_argument("--units", choices=["mm", "cm", "m", "in"], help="units of the model file")
+    p.add_argument("--scale-to", type=float, metavar="MM",
+                   help="scale the model uniformly so its largest extent is MM")
     p.add_argument("--layer-height", type=float, metavar="MM", help="target layer height H")
     p.add_argument("--edge-length", type=float, metavar="MM", help="tet mesh target edge length")
     p.add_argument(
@@ -68,8 +70,11 @@ def job_from_args(args: argparse.Namespace) -> JobConfig:
     """The job file (or defaults) with the command-line overrides applied and validated."""
     job = load_job(args.job)
     overrides: dict[str, dict[str, Any]] = {}
-    if args.units:
-        overrides["model"] = {"units": args.units}
+    if args.units or args.scale_to is not None:
+        overrides["model"] = {
+            **({"units": args.units} if args.units else {}),
+            **({"scale_to_mm": args.scale_to} if args.scale_to is not None else {}),
+        }
     if args.edge_length is not None:
         overrides["mesh"] = {"edge_length_mm": args.edge_length}
     slicing: dict[str, Any] = {}
@@ -103,6 +108,9 @@ def run(args: argparse.Namespace) -> int:
         "total_s": report.get("timing_s", {}).get("total"),
     }
     progress.info(f"done: {json.dumps(summary)}; report in {args.out / 'report.json'}")
+    line = critical_line(report)
+    if line is not None:
+        progress.info(line)
     for note in job_notes(report):  # even with --quiet: they may need acting on
         print(f"note: {note}", flush=True)
     return 0

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from slicer.checks import job_notes
+from slicer.checks import critical_line, job_notes
 
 
 def _report(**toolpath: Any) -> dict[str, Any]:
@@ -44,3 +44,35 @@ def test_each_problem_gets_one_line_naming_it_and_a_fix() -> None:
 
 def test_small_departures_stay_quiet() -> None:
     assert job_notes(_report(height_out_of_profile_fraction=0.005, volume_error=0.015)) == []
+
+
+def test_downward_directions_get_a_note_whose_fix_fits_the_selectors() -> None:
+    report = _report(printing_direction={"downward": 12, "max_from_up_deg": 150.0,
+                                         "downward_layers": [40, 41]})
+    report["job"] = {"config": {"slicing": {"critical": ["bottom:45", "top:45"]}}}
+    (note,) = job_notes(report)
+    assert "12 extruding waypoints print downward" in note
+    assert "--critical bottom:45" in note
+    report["job"]["config"]["slicing"]["critical"] = ["bottom:45@end"]
+    (note,) = job_notes(report)
+    assert "rotate the model" in note
+
+
+def test_coverage_beyond_its_limits_gets_a_note() -> None:
+    fine = _report(coverage={"contour": {"gap": 0.02, "overlap": 0.01},
+                             "stripe": {"gap": 0.04, "overlap": 0.03}})
+    assert job_notes(fine) == []
+    bad = _report(coverage={"contour": {"gap": 0.06, "overlap": 0.01},
+                            "stripe": {"gap": None, "overlap": None}})
+    (note,) = job_notes(bad)
+    assert note.startswith("toolpath: contour layers leave 6.0%")
+
+
+def test_the_critical_line_names_each_selectors_regions() -> None:
+    report = {"slicing": {"critical_regions": [
+        {"selector": "bottom:45@end", "area_mm2": 412.3},
+        {"selector": "top:30", "area_mm2": 80.0}, {"selector": "top:30", "area_mm2": 20.0}]}}
+    assert critical_line(report) == ("critical surfaces: bottom:45@end: 1 region(s) of 412 "
+                                     "mm^2; top:30: 2 region(s) of 80, 20 mm^2")
+    assert critical_line({}) is None
+    assert "none" in str(critical_line({"slicing": {"critical_regions": []}}))

@@ -6,7 +6,7 @@ from slicer.config import CriticalSelector
 from slicer.critical import select_critical_regions
 from slicer.operators import build_operators
 from slicer.stages import TetMesh
-from tests.slicer.conftest import box_mesh
+from tests.slicer.conftest import box_mesh, grid_tets
 
 
 def _sel(*texts: str) -> list[CriticalSelector]:
@@ -74,3 +74,21 @@ def test_position_condition_keeps_only_matching_patches() -> None:
     assert sorted(float(ops.vertices[r.vertices, 2].mean()) for r in both.regions) == [2.0, 3.0]
     none = select_critical_regions(ops, _sel("top@z>10"))
     assert none.regions == () and any("kept no patch" in n for n in none.notes)
+
+
+def test_end_keeps_only_the_patch_at_the_parts_lowest_point() -> None:
+    # An L-shaped step: two downward faces, the base at z = 0 and the overhang's underside at
+    # z = 4; bottom@end takes the base only, plain bottom both.
+    coords, tets = grid_tets(4, 2, 4)
+    keep = ~((coords[tets][:, :, 0].mean(axis=1) > 2) & (coords[tets][:, :, 2].mean(axis=1) < 2))
+    used = np.unique(tets[keep])
+    remap = -np.ones(len(coords), dtype=np.int64)
+    remap[used] = np.arange(len(used))
+    mesh = TetMesh(coords[used] * 2.0, remap[tets[keep]])
+    ops = build_operators(mesh)
+    plain = select_critical_regions(ops, _sel("bottom:10"))
+    assert len(plain.regions) == 2
+    end = select_critical_regions(ops, _sel("bottom:10@end"))
+    assert len(end.regions) == 1
+    assert float(ops.vertices[end.regions[0].vertices][:, 2].max()) == 0.0
+    assert any("away from the part's end" in n for n in end.notes)

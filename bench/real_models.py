@@ -1,0 +1,200 @@
+"""The real-model benchmark: each corpus model through slice, plan and inspect, as a user would.
+
+Each model is scaled to a printable size (``--size``, largest extent, mm) and run with the
+default settings through the command line in child processes: ``mesp slice MODEL --scale-to
+SIZE --no-baselines --out DIR``, ``mesp plan DIR``, ``mesp inspect DIR``. A step that refuses
+keeps its one-line reason (``mesp: error: ...``); the next steps are skipped. Usage:
+
+    .venv/bin/python bench/real_models.py [--models teapot torus ...] [--size 40]
+                                          [--out bench/results/real_models] [--timeout 900]
+                                          [--extra ARG ...]  (more ``mesp slice`` arguments)
+
+Writes ``OUT/table.md`` (one row per model, the table the README shows) and ``OUT/results.json``
+(every number, per model), and prints the table with stage timings and peak memory.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from bench.corpus import (
+    SHARED_MODELS,
+    CorpusModel,
+    generated_models,
+    shared_models,
+)
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _run(args: list[str], timeout: float) -> tuple[str, str, float, float]:
+    """Run ``mesp ARGS``; (status, one-line reason, seconds, peak RSS MB of the child)."""
+    cmd = [sys.executable, "-m", "mesp_cell.cli", *args]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    start = time.perf_counter()
+    try:
+        proc = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout,
+                              stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired:
+        return "timeout", f"no answer within {timeout:g} s", time.perf_counter() - start, 0.0
+    seconds = time.perf_counter() - start
+    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    mem = max(peak, before) / 1024.0
+    err = [ln for ln in proc.stderr.splitlines() if ln.startswith("mesp: error:")]
+    if proc.returncode == 0:
+        return "ok", "", seconds, mem
+    if "Traceback" in proc.stderr:
+        return "crash", proc.stderr.strip().splitlines()[-1][:200], seconds, mem
+    reason = err[-1][len("mesp: error: "):] if err else proc.stderr.strip()[-200:]
+    return f"exit {proc.returncode}", reason, seconds, mem
+
+
+def _get(d: dict[str, Any], *keys: str) -> Any:
+    for k in keys:
+        if not isinstance(d, dict) or k not in d:
+            return None
+        d = d[k]
+    return d
+
+
+def _metrics(report: dict[str, Any]) -> dict[str, Any]:
+    """The table's numbers from one job's report.json (None where a step did not run)."""
+    tp = report.get("toolpath", {})
+    plan = report.get("plan", {})
+    ins = report.get("inspect", {})
+    height = _get(report, "slicing", "height_mm") or {}
+    mean = height.get("mean")
+    cov = tp.get("coverage", {})
+    return {
+        "tets": _get(report, "mesh", "tets"),
+        "layers": _get(report, "slicing", "layers"),
+        "height_cv": (height["std"] / mean) if mean else None,
+        "height_max_mm": height.get("max"),
+        "height_outside_profile": _get(report, "slicing", "height_outside_profile", "fraction"),
+        "gap_contour": _get(cov, "contour", "gap"),
+        "overlap_contour": _get(cov, "contour", "overlap"),
+        "gap_stripe": _get(cov, "stripe", "gap"),
+        "overlap_stripe": _get(cov, "stripe", "overlap"),
+        "width_p90_contour": _get(tp, "width_error", "contour", "p90"),
+        "width_p90_stripe": _get(tp, "width_error", "stripe", "p90"),
+        "volume_error": tp.get("volume_error"),
+        "downward_waypoints": _get(tp, "printing_direction", "downward"),
+        "plan_status": plan.get("status"),
+        "alpha_min": _get(plan, "alpha_deg", "min"),
+        "alpha_max": _get(plan, "alpha_deg", "max"),
+        "speed_within_5pct": _get(plan, "speed_ratio", "within_5pct"),
+        "interior_infill": ins.get("interior_infill_ratio"),
+        "pores": ins.get("pore_ratio"),
+        "surface_error_mm": _get(ins, "surface_error_mm", "mean"),
+    }
+
+
+def run_model(model: CorpusModel, out: Path, size: float, timeout: float,
+              extra: list[str], previous: dict[str, Any] | None = None) -> dict[str, Any]:
+    """slice, plan, inspect one model; its statuses, reasons, timings and metrics. With
+    ``previous`` (this model's row of an earlier run whose slice is in ``out``), the slice is
+    kept and only plan and inspect run again."""
+    job = out / model.name
+    row: dict[str, Any] = {"model": model.name, "origin": model.origin}
+    steps = [
+        ("slice", ["slice", str(model.path), "--scale-to", str(size), "--no-baselines",
+                   "--quiet", "--out", str(job), *extra]),
+        ("plan", ["plan", str(job), "--quiet"]),
+        ("inspect", ["inspect", str(job), "--quiet", "--no-figures"]),
+    ]
+    if previous is not None:
+        row["slice"] = previous["slice"]
+        steps = steps[1:] if previous["slice"]["status"] == "ok" else []
+        print(f"  {model.name:18s} slice    kept from the previous run", flush=True)
+    for name, args in steps:
+        status, reason, seconds, mem = _run(args, timeout)
+        row[name] = {"status": status, "reason": reason, "s": round(seconds, 1),
+                     "peak_mb": round(mem)}
+        print(f"  {model.name:18s} {name:8s} {status:8s} {seconds:7.1f} s  {reason[:110]}",
+              flush=True)
+        if status != "ok" and not (name == "plan" and status == "exit 3"):
+            break  # exit 3: a plan the cell cannot execute, still written for inspection
+    report_path = job / "report.json"
+    report = json.loads(report_path.read_text()) if report_path.is_file() else {}
+    row["metrics"] = _metrics(report)
+    return row
+
+
+def _pct(x: Any) -> str:
+    return "" if x is None else f"{100 * x:.1f}"
+
+
+def _num(x: Any, fmt: str = ".2f") -> str:
+    return "" if x is None else format(x, fmt)
+
+
+def table(rows: list[dict[str, Any]]) -> str:
+    """The markdown table: one row per model."""
+    head = ("| model | slice | plan | inspect | tets | layers | H CV | H max mm | "
+            "gap/overlap contour % | gap/overlap stripe % | width p90 contour/stripe % | "
+            "volume err % | alpha deg | speed kept % | infill % | pores % | surface err mm |")
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for r in rows:
+        m = r["metrics"]
+
+        def step(name: str, r: dict[str, Any] = r) -> str:
+            s = r.get(name)
+            if s is None:
+                return "-"
+            text = f"{s['status']} {s['s']:.0f} s"
+            return text if not s["reason"] else f"{text}: {s['reason'][:90]}"
+
+        alpha = ("" if m["alpha_min"] is None
+                 else f"{m['alpha_min']:.1f}-{m['alpha_max']:.1f}")
+        lines.append(
+            f"| {r['model']} | {step('slice')} | {step('plan')} | {step('inspect')} | "
+            f"{m['tets'] or ''} | {m['layers'] or ''} | {_num(m['height_cv'])} | "
+            f"{_num(m['height_max_mm'])} | {_pct(m['gap_contour'])}/{_pct(m['overlap_contour'])} | "
+            f"{_pct(m['gap_stripe'])}/{_pct(m['overlap_stripe'])} | "
+            f"{_pct(m['width_p90_contour'])}/{_pct(m['width_p90_stripe'])} | "
+            f"{_num(None if m['volume_error'] is None else 100 * m['volume_error'])} | {alpha} | "
+            f"{_pct(m['speed_within_5pct'])} | {_pct(m['interior_infill'])} | "
+            f"{_pct(m['pores'])} | {_num(m['surface_error_mm'], '.3f')} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--models", nargs="*", help="model names (file stems); default: all")
+    ap.add_argument("--size", type=float, default=40.0, help="largest extent, mm")
+    ap.add_argument("--reuse", action="store_true",
+                    help="keep the slices of the previous run in OUT; plan and inspect again")
+    ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "real_models")
+    ap.add_argument("--timeout", type=float, default=900.0, help="per step, s")
+    ap.add_argument("--shared", type=Path, default=SHARED_MODELS,
+                    help="folder of the shared real models")
+    ap.add_argument("--extra", nargs=argparse.REMAINDER, default=[],
+                    help="more mesp slice arguments (the rest of the line)")
+    args = ap.parse_args(argv)
+    corpus = shared_models(args.shared) + generated_models(args.out / "generated")
+    if args.models:
+        corpus = [m for m in corpus if m.name in set(args.models)]
+    before: dict[str, Any] = {}
+    if args.reuse and (args.out / "results.json").is_file():
+        before = {r["model"]: r for r in json.loads((args.out / "results.json").read_text())}
+    rows = [run_model(m, args.out, args.size, args.timeout, args.extra, before.get(m.name))
+            for m in corpus]
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "results.json").write_text(json.dumps(rows, indent=1))
+    text = table(rows)
+    (args.out / "table.md").write_text(text + "\n")
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
