@@ -80,10 +80,12 @@ def imports(known: dict[str, Path]) -> list[Edge]:
         is_pkg = path.name == "__init__.py"
         tree = ast.parse(path.read_text(), filename=str(path))
         for node in ast.walk(tree):
+            if not isinstance(node, ast.Import | ast.ImportFrom):
+                continue
             targets: list[str] = []
             if isinstance(node, ast.Import):
                 targets = [a.name for a in node.names]
-            elif isinstance(node, ast.ImportFrom):
+            else:
                 if node.level:  # relative: from the package holding this module
                     base = mod.split(".")
                     base = base[: len(base) - node.level + (1 if is_pkg else 0)]
