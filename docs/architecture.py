@@ -149,6 +149,45 @@ def levels(order: list[str], across: dict[tuple[str, str], int]) -> dict[str, in
     return level
 
 
+def _overlap(a: tuple[float, float, float, float], b: tuple[float, float, float, float]) -> float:
+    """Overlap area of two rectangles given as (centre x, centre y, half width, half height)."""
+    dx = min(a[0] + a[2], b[0] + b[2]) - max(a[0] - a[2], b[0] - b[2])
+    dy = min(a[1] + a[3], b[1] + b[3]) - max(a[1] - a[3], b[1] - b[3])
+    return max(dx, 0.0) * max(dy, 0.0)
+
+
+def _label_place(p0: tuple[float, float], p1: tuple[float, float], lines: int,
+                 boxes: list[tuple[float, float, float, float]],
+                 taken: list[tuple[float, float, float, float]]) -> tuple[float, float]:
+    """A point along the arrow p0 -> p1 where a label of ``lines`` text lines overlaps the
+    package boxes and the labels placed before it least (appended to ``taken``)."""
+    best: tuple[float, float, float] | None = None
+    for t in (0.5, 0.35, 0.65, 0.25, 0.75, 0.42, 0.58):
+        x, y = p0[0] + t * (p1[0] - p0[0]), p0[1] + t * (p1[1] - p0[1])
+        rect = (x, y, 1.3, 0.09 * lines + 0.12)
+        cost = sum(_overlap(rect, r) for r in boxes + taken)
+        if best is None or cost < best[0] - 1e-9:
+            best = (cost, x, y)
+    assert best is not None
+    taken.append((best[1], best[2], 1.3, 0.09 * lines + 0.12))
+    return best[1], best[2]
+
+
+def _box_lines(pkg: str, known: dict[str, Path]) -> list[str]:
+    """The text of a package's box: its own modules, then each sub-package, with counts."""
+    subs: dict[str, list[str]] = defaultdict(list)
+    for m in known:
+        parts = m.split(".")
+        if parts[0] != pkg:
+            continue
+        nested = len(parts) > 2 or (len(parts) == 2 and known[m].name == "__init__.py")
+        subs[parts[1] if nested else ""].append(m)
+    loc = {s: sum(len(known[m].read_text().splitlines()) for m in ms) for s, ms in subs.items()}
+    lines = [f"{pkg}/  {len(subs.get('', []))} modules, {loc.get('', 0):,} lines"]
+    return lines + [f"  {s}/  {len(subs[s])} modules, {loc[s]:,} lines"
+                    for s in sorted(subs) if s]
+
+
 def draw(known: dict[str, Path], edges: list[Edge], out: Path) -> None:
     """One box per top-level package (its sub-packages, module and line counts inside), one
     arrow per importing pair (width ~ number of imports) labelled with the modules imported
@@ -171,6 +210,10 @@ def draw(known: dict[str, Path], edges: list[Edge], out: Path) -> None:
         zig = (0.0, 4.2, -4.2)[lv % 3] if len(ps) == 1 else 0.0
         for i, p in enumerate(ps):
             pos[p] = (zig + (i - (len(ps) - 1) / 2) * 8.4, lv * 3.4)
+    box_text = {p: _box_lines(p, known) for p in pos}
+    # centre, half width, half height of each package box (as drawn below, with its padding)
+    boxes = [(x, y, 2.4, 0.38 + 0.15 * len(box_text[p])) for p, (x, y) in pos.items()]
+    taken: list[tuple[float, float, float, float]] = []
     fig, ax = plt.subplots(figsize=(12, 3.0 * len(by_level) + 1.5))
     for (a, b), n in sorted(count.items()):
         (x0, y0), (x1, y1) = pos[a], pos[b]
@@ -181,25 +224,13 @@ def draw(known: dict[str, Path], edges: list[Edge], out: Path) -> None:
             lw=0.8 + 0.35 * n ** 0.5, color=colour, alpha=0.8, shrinkA=48, shrinkB=48,
             zorder=1))
         names = textwrap.fill(", ".join(sorted(across[(a, b)])), 34)
-        # labels where the straight arrows of this zig-zag layout do not cross
-        t = 0.62 if abs(level[a] - level[b]) >= 3 else 0.3 if abs(x1 - x0) > 5 else 0.5
-        mx, my = x0 + t * (x1 - x0), y0 + t * (y1 - y0)
-        ax.text(mx, my, f"{a} -> {b}: {n} imports of\n{names}", fontsize=7.5, ha="center",
+        label = f"{a} -> {b}: {n} imports of\n{names}"
+        mx, my = _label_place((x0, y0), (x1, y1), label.count("\n") + 1, boxes, taken)
+        ax.text(mx, my, label, fontsize=7.5, ha="center",
                 va="center", color=colour, zorder=3,
                 bbox={"boxstyle": "round,pad=0.25", "fc": "white", "ec": colour, "lw": 0.6})
     for p, (x, y) in pos.items():
-        mods = [m for m in known if m.split(".")[0] == p]
-        subs: dict[str, list[str]] = defaultdict(list)
-        for m in mods:
-            parts = m.split(".")
-            sub = parts[1] if len(parts) > 2 or (len(parts) == 2 and known[m].name ==
-                                                 "__init__.py") else ""
-            subs[sub].append(m)
-        loc = {s: sum(len(known[m].read_text().splitlines()) for m in ms)
-               for s, ms in subs.items()}
-        lines = [f"{p}/  {len(subs.get('', []))} modules, {loc.get('', 0):,} lines"]
-        lines += [f"  {s}/  {len(subs[s])} modules, {loc[s]:,} lines"
-                  for s in sorted(subs) if s]
+        lines = box_text[p]
         h = 0.55 + 0.3 * len(lines)
         ax.add_patch(FancyBboxPatch((x - 2.3, y - h / 2), 4.6, h, boxstyle="round,pad=0.08",
                                     fc=COLOURS.get(p, "#cccccc"), ec="black", lw=0.8,
@@ -224,7 +255,7 @@ def draw(known: dict[str, Path], edges: list[Edge], out: Path) -> None:
     ax.set_title("MESP Cell: package dependencies read from the imports "
                  "(python docs/architecture.py)", fontsize=11)
     fig.tight_layout()
-    fig.savefig(out, dpi=80)
+    fig.savefig(out, dpi=80, bbox_inches="tight")
     plt.close(fig)
 
 
