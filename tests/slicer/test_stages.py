@@ -94,3 +94,12 @@ def test_missing_or_corrupt_file_is_input_error(tmp_path: Path) -> None:
 def test_save_is_atomic_and_leaves_no_temp_files(tmp_path: Path) -> None:
     _tetmesh().save(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["tetmesh.npz"]
+
+
+def test_stage_files_are_readable_by_the_lab(tmp_path: Path) -> None:
+    from slicer.artifacts import atomic_write_bytes, save_npz
+
+    atomic_write_bytes(tmp_path / "report.json", b"{}")
+    save_npz(tmp_path / "a.npz", {"x": np.zeros(3)})
+    for name in ("report.json", "a.npz"):
+        assert (tmp_path / name).stat().st_mode & 0o777 == 0o644
