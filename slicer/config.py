@@ -10,7 +10,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from slicer.configtools import build, merge, read_toml
+from slicer.configtools import build, merge, read_ranges, read_toml
 from slicer.errors import InputError
 
 UNIT_SCALE_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
@@ -211,11 +211,13 @@ class JobConfig:
     def with_overrides(self, **sections: dict[str, Any]) -> JobConfig:
         """A new config with some keys of some sections replaced, validated again."""
         data = {name: vars_of(getattr(self, name)) for name in sections}
+        ranges = job_ranges()
         out = self
         for name, changes in sections.items():
             merged = {**data[name], **changes}
             section_cls = type(getattr(self, name))
-            out = replace(out, **{name: build(section_cls, merged, name)})
+            own = {k[len(name) + 1:]: v for k, v in ranges.items() if k.startswith(f"{name}.")}
+            out = replace(out, **{name: build(section_cls, merged, name, own, RANGES_FILE)})
         return out
 
 
@@ -232,9 +234,19 @@ def default_data() -> dict[str, Any]:
     return tomllib.loads(text)
 
 
+RANGES_FILE = "slicer/ranges.toml"
+
+
+def job_ranges() -> dict[str, tuple[float, float]]:
+    """The accepted range of every number of a job (``slicer/ranges.toml``)."""
+    text = resources.files("slicer").joinpath("ranges.toml").read_text()
+    return read_ranges(text, RANGES_FILE)
+
+
 def load_job(path: Path | None = None) -> JobConfig:
-    """The defaults, overridden by the job file at ``path`` if given."""
+    """The defaults, overridden by the job file at ``path`` if given; every number finite and
+    within its range (``slicer/ranges.toml``)."""
     data = default_data()
     if path is not None:
         data = merge(data, read_toml(path))
-    return build(JobConfig, data, "job")
+    return build(JobConfig, data, "job", job_ranges(), RANGES_FILE)

@@ -36,6 +36,7 @@ from mesp_cell.messages import (
     WaypointReached,
 )
 from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
+from mesp_cell.step_timeouts import plan_timeout, slice_timeout
 from slicer.errors import InputError
 
 log = logging.getLogger("mesp.supervisor")
@@ -63,8 +64,9 @@ class SupervisorNode(LifecycleNode):
         self.time_scale = float(p.get("time_scale", 1.0))
         self.settle_s = float(p.get("settle_s", 0.05))  # wall s for a switch-on to show
         self.names = {k: p.get(k, k) for k in ("robot", "extruder", "slicer", "planner")}
-        self.timeouts = {"slice": float(p.get("slice_timeout_s", 3600.0)),
-                         "plan": float(p.get("plan_timeout_s", 3600.0)),
+        # 0 = sized to each job (mesp_cell.step_timeouts)
+        self.timeouts = {"slice": float(p.get("slice_timeout_s", 0.0)),
+                         "plan": float(p.get("plan_timeout_s", 0.0)),
                          "move": float(p.get("move_timeout_s", 120.0))}
         self.poll_s = float(p.get("poll_s", 0.1))
         self.alive: set[str] = set()
@@ -206,11 +208,20 @@ class SupervisorNode(LifecycleNode):
             return
         reply = self._request(node, Command.make(verb, job.id, model=job.model,
                                                  job_file=job.job_file, cell_file=job.cell_file,
-                                                 dir=job.dir), self.timeouts[verb])
+                                                 dir=job.dir), self._step_timeout(verb, job))
         if reply.ok:
             self.store.transition(job.id, next_state, expect=job.state)
         else:
             self.store.transition(job.id, "failed", f"{verb}: {reply.reason}")
+
+    def _step_timeout(self, verb: str, job: JobRecord) -> float:
+        """The launch's fixed timeout for ``verb`` if it sets one, else one sized to the job
+        (``mesp_cell.step_timeouts``; an unreadable model fails the job here)."""
+        if self.timeouts.get(verb):
+            return self.timeouts[verb]
+        if verb == "slice":
+            return slice_timeout(Path(job.model), Path(job.job_file) if job.job_file else None)
+        return plan_timeout(Path(job.dir))
 
     def _print(self, job: JobRecord) -> None:
         resume = job.state in ("paused", "interrupted")

@@ -84,3 +84,11 @@ def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
         return adapters.plan_job(job_dir, cell_file)
     save_npz(Path(job_dir) / "trajectory.npz", trajectory_arrays(LAYERS * PER_LAYER))
     return {}
+
+
+def write_cube(path: Path, size_mm: float = 20.0) -> Path:
+    """A closed cube STL of ``size_mm`` (the model a submission loads and checks)."""
+    import trimesh
+
+    trimesh.creation.box(extents=[size_mm] * 3).export(path)
+    return path

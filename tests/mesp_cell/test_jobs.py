@@ -11,6 +11,7 @@ import pytest
 from mesp_cell.jobs import JobStore, check_submission
 from mesp_cell.launcher import CellClient
 from slicer.errors import InputError
+from tests.mesp_cell import synthetic
 
 
 @pytest.fixture
@@ -21,7 +22,7 @@ def store(tmp_path: Path) -> JobStore:
 @pytest.fixture
 def model(tmp_path: Path) -> Path:
     p = tmp_path / "My Part.stl"
-    p.write_text("solid x\nendsolid x\n")
+    synthetic.write_cube(p)  # a real model: submit loads it
     return p
 
 
