@@ -193,9 +193,23 @@ class ToolpathConfig:
             raise ValueError("max_step_elevation_deg must be 0 (off) or up to 60 (deg)")
 
 
+_PROFILE_NAME = re.compile(r"^[a-z0-9][a-z0-9._-]{0,63}$")
+
+
 @dataclass(frozen=True)
 class ExtrusionConfig:
+    """The extrusion profile: a bundled name (``slicer/profiles/NAME.toml``) or the path of a
+    profile ``.toml``; nothing else is read (a name cannot leave the profiles folder)."""
+
     profile: str = "ecoflex-0030"
+
+    def __post_init__(self) -> None:
+        if self.profile.endswith(".toml") and len(self.profile) <= 4096:
+            return
+        if not _PROFILE_NAME.match(self.profile) or self.profile.endswith(".toml"):
+            raise ValueError(f"profile = {self.profile!r} is neither a bundled profile name "
+                             "nor a path ending in .toml; name one (e.g. ecoflex-0030) or give "
+                             "a profile .toml")
 
 
 @dataclass(frozen=True)

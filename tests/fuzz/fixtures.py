@@ -15,6 +15,7 @@ def cube_stl(path: Path, size_mm: float = 20.0) -> Path:
     """A closed cube of ``size_mm``, corner at the origin, as a binary STL."""
     box = trimesh.creation.box(extents=[size_mm] * 3)
     box.apply_translation([size_mm / 2] * 3)
+    path.parent.mkdir(parents=True, exist_ok=True)
     box.export(path)
     return path
 
