@@ -65,7 +65,7 @@ def contend(reads: int, tree: Path, seconds: float = 60.0) -> Contention:
                     worst = max(worst, abs(last - value))
                 else:
                     last = value
-            return Contention(reads, torn, worst, int(round(last / STEP)))
+            return Contention(reads, torn, worst, round(last / STEP))
         finally:
             writer.kill()
             writer.wait()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 import re
+import typing
 from typing import Any
 
 from slicer.errors import InputError
@@ -70,10 +71,11 @@ def number(value: Any, where: str, bounds: tuple[float, float], whole: bool = Fa
     if isinstance(value, bool) or not isinstance(value, kinds):
         raise InputError(f"{where} must be a {'whole ' if whole else ''}number, got {value!r}",
                          f"write a number from {bounds[0]:g} to {bounds[1]:g}")
-    if not (math.isfinite(value) and bounds[0] <= value <= bounds[1]):
+    x = float(typing.cast(float, value))
+    if not (math.isfinite(x) and bounds[0] <= x <= bounds[1]):
         raise InputError(f"{where} = {value!r} is outside {bounds[0]:g} to {bounds[1]:g}",
                          f"write a number from {bounds[0]:g} to {bounds[1]:g}")
-    return value
+    return x
 
 
 def flag(value: Any, where: str) -> bool:

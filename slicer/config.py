@@ -259,8 +259,12 @@ def job_ranges() -> dict[str, tuple[float, float]]:
 
 def load_job(path: Path | None = None) -> JobConfig:
     """The defaults, overridden by the job file at ``path`` if given; every number finite and
-    within its range (``slicer/ranges.toml``)."""
+    within its range (``slicer/ranges.toml``), the extrusion profile readable."""
+    from slicer.extrusion import load_profile
+
     data = default_data()
     if path is not None:
         data = merge(data, read_toml(path))
-    return build(JobConfig, data, "job", job_ranges(), RANGES_FILE)
+    job = build(JobConfig, data, "job", job_ranges(), RANGES_FILE)
+    load_profile(job.extrusion.profile)  # read and checked now, not after the tet mesh
+    return job

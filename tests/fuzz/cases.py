@@ -317,7 +317,8 @@ SUBMIT_CASES = [
     Case("submit", ".off model", _submit(lambda t: _write(t / "a.off", "OFF\n3 1 0\n0 0 0\n"
                                                           "1 0 0\n0 1 0\n3 0 1 2\n"))),
     Case("submit", ".3mf model", _submit(lambda t: _write(t / "a.3mf", b"PK\x03\x04x" * 10))),
-    Case("submit", ".mesh model", _submit(lambda t: _write(t / "a.mesh", "MeshVersionFormatted 1\n"))),
+    Case("submit", ".mesh model",
+         _submit(lambda t: _write(t / "a.mesh", "MeshVersionFormatted 1\n"))),
     Case("submit", ".stl symlink to /etc/shadow", _submit(_link)),
     Case("submit", ".stl symlink out of its folder", _submit(_link_outside)),
     Case("submit", "garbage .vtu", _submit(lambda t: _write(t / "a.vtu", b"<?xml \x00\xff" * 5))),

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from slicer.artifacts import save_npz
 from slicer.stages import Toolpath
 
 
@@ -41,7 +42,7 @@ def job_dir(root: Path, arrays: dict[str, np.ndarray] | None = None) -> Path:
     """A job directory with toolpath.npz (``arrays`` written as given) and model.ply."""
     root.mkdir(parents=True, exist_ok=True)
     data = toolpath_arrays() if arrays is None else arrays
-    np.savez(root / Toolpath.FILE, **data)
+    save_npz(root / Toolpath.FILE, data)
     box = trimesh.creation.box(extents=[5.0, 5.0, 3.0])
     box.apply_translation([2.5, 2.5, 1.5])
     box.export(root / "model.ply")

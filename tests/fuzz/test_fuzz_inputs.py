@@ -26,6 +26,7 @@ from hypothesis import strategies as st
 
 from planner.cell import default_cell_data
 from sim.gcode import parse_gcode
+from slicer.artifacts import save_npz
 from slicer.config import default_data
 from slicer.errors import InputError
 from slicer.stages import Toolpath
@@ -79,7 +80,7 @@ def mutated_text(draw: st.DrawFn, text: str) -> bytes:
         elif kind == "double":
             lines.insert(i, lines[i])
         elif kind == "cut":
-            lines = lines[:i] + [lines[i][: draw(st.integers(0, len(lines[i])))]]
+            lines = [*lines[:i], lines[i][:draw(st.integers(0, len(lines[i])))]]
         else:
             lines.insert(i, draw(st.binary(min_size=1, max_size=40)).decode("latin-1"))
     return "".join(lines).encode("latin-1")
@@ -220,7 +221,7 @@ def mutated_toolpath(draw: st.DrawFn) -> dict[str, np.ndarray]:
 def test_mutated_toolpaths_load_valid_or_refused_in_one_line(
         arrays: dict[str, np.ndarray]) -> None:
     with _fresh() as tmp:
-        np.savez(tmp / Toolpath.FILE, **arrays)
+        save_npz(tmp / Toolpath.FILE, arrays)
         toolpath = _accepted_or_input_error("toolpath.npz", lambda: Toolpath.load(tmp))
         if toolpath is not None:
             assert toolpath.check() == "" and toolpath.extrude.any()
