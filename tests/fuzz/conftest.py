@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, settings
 
 from tests.fuzz.harness import COUNTS
 
-settings.register_profile("ci", max_examples=25, deadline=None, derandomize=False,
+settings.register_profile("ci", max_examples=50, deadline=None, derandomize=False,
                           suppress_health_check=[HealthCheck.too_slow,
                                                  HealthCheck.function_scoped_fixture])
 settings.register_profile("long", max_examples=2000, deadline=None,

@@ -111,6 +111,7 @@ def assert_refused(argv: list[str], cwd: Path, out_dirs: tuple[str, ...] = ("out
         outcome = run(argv, cwd)
         assert_one_line(outcome)
         assert_clean(outcome, cwd, out_dirs)
+        COUNTS[f"{kind or argv[0]}: refused"] += 1
     except BaseException:
         COUNTS[f"{kind or argv[0]}: failed"] += 1
         raise
