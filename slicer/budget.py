@@ -1,7 +1,7 @@
 """The layers a slicing job asks for, estimated from the model before any work is done.
 
 A job whose numbers are each within range can still ask for hours of work: 0.05 mm layers on
-a 200 mm part are 4,000+ toolpath layers (0.1-1 s each, and memory for all of them).
+a 200 mm part are up to 7,000 layers, each a toolpath of its own.
 ``check_budget`` refuses such a job with one line before tetrahedralisation, naming the
 estimate, the limit and the setting to change. (The tets fTetWild would make are estimated
 and limited in ``slicer.tetrahedralize``.)

@@ -128,7 +128,8 @@ class LifecycleNode:
 
         before = set(threading.enumerate())
         self.bus.serve(guarded, topic)
-        self._workers += [t for t in threading.enumerate() if t not in before]
+        worker = f"{self.bus.node}-{topic}"  # the name Bus.serve gives its worker thread
+        self._workers += [t for t in threading.enumerate() if t not in before and t.name == worker]
 
     def _heartbeat(self) -> None:
         while not self.stopping.wait(self.heartbeat_s):
