@@ -300,7 +300,8 @@ class Toolpath(Stage):
         if np.abs(self.position).max() > MAX_COORDINATE_MM:
             return (f"a waypoint lies {np.abs(self.position).max():.3g} mm from the origin, "
                     f"beyond {MAX_COORDINATE_MM:g} mm")
-        norm = np.linalg.norm(self.normal, axis=1)
+        with np.errstate(over="ignore"):  # a normal of 1e300 is refused below, not warned
+            norm = np.linalg.norm(self.normal, axis=1)
         if np.any(np.abs(norm - 1.0) > 1e-3):
             return f"normal {int(np.argmax(np.abs(norm - 1.0)))} is not a unit vector"
         for name, top in (("height", MAX_HEIGHT_MM), ("width", MAX_WIDTH_MM),

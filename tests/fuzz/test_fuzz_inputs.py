@@ -203,8 +203,11 @@ def mutated_toolpath(draw: st.DrawFn) -> dict[str, np.ndarray]:
         if kind == "value" and arr.size:
             i = draw(st.integers(0, len(arr) - 1))
             value = draw(WEIRD_NUMBERS)
-            if arr.dtype.kind in "iub":
-                value = 0 if not math.isfinite(value) else int(max(min(value, 100), -100))
+            if arr.dtype.kind == "b":
+                value = bool(value)
+            elif arr.dtype.kind in "iu":  # the nearest whole number the dtype holds
+                info = np.iinfo(arr.dtype)
+                value = int(min(max(value, info.min), info.max)) if math.isfinite(value) else 0
             arr[i] = value
         elif kind == "shape":
             arr = arr[: draw(st.integers(0, len(arr)))]
