@@ -292,6 +292,9 @@ LAUNCH_CASES = [
                  .replace("restart = \"never\"", "restart = \"never\"\nparams = \"x\""))),
     Case("launch", "cell name a table", _launch(fixtures.LAUNCH_OK.replace(
         "name = \"fuzz\"", "name = {a = 1}"))),
+    Case("launch", "--set time_scale=nan", lambda tmp: [
+        "launch", str(_write(tmp / "launch.toml", fixtures.LAUNCH_OK)), "--set",
+        "time_scale=nan", "--log-dir", str(tmp / "logs")]),
 ]
 
 
