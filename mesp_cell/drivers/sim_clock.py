@@ -17,10 +17,8 @@ sequence again: unchanged, the value is whole (the writer only ever fills the ot
 changed (a value was published during the read, which takes under a microsecond), it reads
 again. So a reader never sees a torn value and never waits for a writer, even one stopped or
 killed in the middle of a write: the published slot stays whole. (Store and load order as on
-x86-64, where the cell runs: Python cannot place memory barriers.)
-The earlier seqlock made readers spin while the sequence was odd and, after 10,000 tries
-(a writer descheduled on a loaded host), return the half-written value: torn reads, jumps of
-the simulated time. Without a path the clock is private to one process.
+x86-64, where the cell runs: Python cannot place memory barriers.) Without a path the clock
+is private to one process.
 """
 
 from __future__ import annotations
