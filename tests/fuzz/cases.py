@@ -8,32 +8,14 @@ checkout, which is how the before/after counts are measured).
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from tests.fuzz import fixtures
-
-
-@dataclass(frozen=True)
-class Case:
-    """A malformed input: ``kind`` (entry point), ``name``, ``build(tmp) -> argv``."""
-
-    kind: str
-    name: str
-    build: Callable[[Path], list[str]]
-
-
-def _write(path: Path, text: str | bytes) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if isinstance(text, bytes):
-        path.write_bytes(text)
-    else:
-        path.write_text(text)
-    return path
+from tests.fuzz.case import Case, write_file
+from tests.fuzz.cases_cell import LAUNCH_CASES, SUBMIT_CASES
 
 
 def _slice(model: Path, tmp: Path, *extra: str) -> list[str]:
@@ -42,7 +24,7 @@ def _slice(model: Path, tmp: Path, *extra: str) -> list[str]:
 
 
 def _mesh(name: str, text: str | bytes) -> Callable[[Path], list[str]]:
-    return lambda tmp: _slice(_write(tmp / name, text), tmp)
+    return lambda tmp: _slice(write_file(tmp / name, text), tmp)
 
 
 _CUBE_OBJ = "".join(f"v {x} {y} {z}\n" for x in (0, 20) for y in (0, 20) for z in (0, 20))
@@ -81,11 +63,11 @@ MESH_CASES = [
     Case("mesh", "stl empty file", _mesh("a.stl", b"")),
     Case("mesh", "stl of random bytes", _mesh("a.stl", bytes(range(256)) * 7)),
     Case("mesh", "model in an unreadable format (.off)", _mesh("a.off", "OFF\n0 0 0\n")),
-    Case("mesh", "model a directory", lambda tmp: _slice(_write(tmp / "d.stl" / "x", "")
+    Case("mesh", "model a directory", lambda tmp: _slice(write_file(tmp / "d.stl" / "x", "")
                                                          .parent, tmp)),
     Case("mesh", "model missing", lambda tmp: _slice(tmp / "missing.stl", tmp)),
     Case("mesh", "cube x1e6 (read as mm)", lambda tmp: _slice(
-        _write(tmp / "a.obj", "".join(f"v {x} {y} {z}\n" for x in (0, 2e7) for y in (0, 2e7)
+        write_file(tmp / "a.obj", "".join(f"v {x} {y} {z}\n" for x in (0, 2e7) for y in (0, 2e7)
                                       for z in (0, 2e7)) + _CUBE_F), tmp)),
     Case("mesh", "vtk tet mesh with a nan point",
          _mesh("a.vtk", _vtk("0 0 0\n20 0 0\n0 20 0\nnan 0 20", 4))),
@@ -102,7 +84,7 @@ def _job(text: str) -> Callable[[Path], list[str]]:
     def build(tmp: Path) -> list[str]:
         model = fixtures.cube_stl(tmp / "cube.stl")
         return ["slice", str(model), "--out", str(tmp / "out"), "--quiet", "--no-baselines",
-                "--job", str(_write(tmp / "job.toml", text))]
+                "--job", str(write_file(tmp / "job.toml", text))]
     return build
 
 
@@ -129,7 +111,7 @@ JOB_CASES = [
     Case("job", "profile names a missing file", _job("[extrusion]\nprofile = \"../nope.toml\"\n")),
     Case("job", "max_size_mm nan", _job("[model]\nmax_size_mm = nan\n")),
     Case("job", "job file binary", lambda tmp: _slice(fixtures.cube_stl(tmp / "c.stl"), tmp,
-                                                      "--job", str(_write(tmp / "j.toml",
+                                                      "--job", str(write_file(tmp / "j.toml",
                                                                           b"\xff\xfe\x00")))),
     Case("job", "--layer-height nan flag",
          lambda tmp: _slice(fixtures.cube_stl(tmp / "c.stl"), tmp, "--layer-height", "nan")),
@@ -142,7 +124,7 @@ def _cell(text: str) -> Callable[[Path], list[str]]:
     def build(tmp: Path) -> list[str]:
         job = fixtures.job_dir(tmp / "job")
         return ["plan", str(job), "--no-figures", "--quiet", "--cell",
-                str(_write(tmp / "cell.toml", text))]
+                str(write_file(tmp / "cell.toml", text))]
     return build
 
 
@@ -216,7 +198,7 @@ STAGE_CASES = [
     Case("stage", "inspect: deposits nothing", _inspect(_set("extrude", False))),
     Case("stage", "inspect: zero speed", _inspect(_set("speed", 0.0))),
     Case("stage", "plan: toolpath.npz of garbage", lambda tmp: [
-        "plan", str(_write(tmp / "job" / "toolpath.npz", b"PK\x03\x04garbage").parent),
+        "plan", str(write_file(tmp / "job" / "toolpath.npz", b"PK\x03\x04garbage").parent),
         "--no-figures", "--quiet"]),
     Case("stage", "plan: toolpath.npz missing an array", lambda tmp: [
         "plan", str(_drop(fixtures.job_dir(tmp / "job"), "speed")), "--no-figures", "--quiet"]),
@@ -245,7 +227,7 @@ def _garbage_model(job: Path) -> Path:
 def _gcode(text: str | bytes) -> Callable[[Path], list[str]]:
     def build(tmp: Path) -> list[str]:
         job = fixtures.job_dir(tmp / "job")
-        return ["inspect", str(job), "--gcode", str(_write(tmp / "a.gcode", text)),
+        return ["inspect", str(job), "--gcode", str(write_file(tmp / "a.gcode", text)),
                 "--no-figures", "--quiet", "--voxel", "0.5"]
     return build
 
@@ -262,77 +244,6 @@ GCODE_CASES = [
     Case("gcode", "layer 1e9 mm up", _gcode(_G_OK + "G1 Z1e9\nG1 X0 Y0 E0.2\n")),
 ]
 
-
-def _launch(text: str) -> Callable[[Path], list[str]]:
-    return lambda tmp: ["launch", str(_write(tmp / "launch.toml", text)), "--log-dir",
-                        str(tmp / "logs")]
-
-
-LAUNCH_CASES = [
-    Case("launch", "heartbeat_timeout a string",
-         _launch(fixtures.LAUNCH_OK.replace("heartbeat_timeout = 5.0",
-                                            "heartbeat_timeout = \"soon\""))),
-    Case("launch", "max_restarts a string",
-         _launch(fixtures.LAUNCH_OK.replace("restart = \"never\"",
-                                            "restart = \"never\"\nmax_restarts = \"x\""))),
-    Case("launch", "args a number",
-         _launch(fixtures.LAUNCH_OK.replace("restart = \"never\"",
-                                            "restart = \"never\"\nargs = 5"))),
-    Case("launch", "hub port 99999",
-         _launch(fixtures.LAUNCH_OK.replace("auto\"", "99999\"", 1))),
-    Case("launch", "hub not an endpoint",
-         _launch(fixtures.LAUNCH_OK.replace("tcp/127.0.0.1:auto", "nonsense"))),
-    Case("launch", "process a string", _launch("[cell]\nname = \"x\"\nprocess = \"a\"\n")),
-    Case("launch", "connect a number", _launch(fixtures.LAUNCH_OK.replace(
-        "hub = \"tcp/127.0.0.1:auto\"", "hub = \"tcp/127.0.0.1:auto\"\nconnect = 3"))),
-    Case("launch", "heartbeat_timeout nan",
-         _launch(fixtures.LAUNCH_OK.replace("heartbeat_timeout = 5.0", "heartbeat_timeout = nan"))),
-    Case("launch", "params a string",
-         _launch(fixtures.LAUNCH_OK.replace("[process.params]\nslice_fn = \"\"\n", "")
-                 .replace("restart = \"never\"", "restart = \"never\"\nparams = \"x\""))),
-    Case("launch", "cell name a table", _launch(fixtures.LAUNCH_OK.replace(
-        "name = \"fuzz\"", "name = {a = 1}"))),
-    Case("launch", "--set time_scale=nan", lambda tmp: [
-        "launch", str(_write(tmp / "launch.toml", fixtures.LAUNCH_OK)), "--set",
-        "time_scale=nan", "--log-dir", str(tmp / "logs")]),
-]
-
-
-def _submit(make: Callable[[Path], Path], *extra: str) -> Callable[[Path], list[str]]:
-    return lambda tmp: ["job", "submit", str(make(tmp)), *extra]
-
-
-def _link(tmp: Path) -> Path:
-    link = tmp / "model.stl"
-    os.symlink("/etc/shadow", link)
-    return link
-
-
-def _link_outside(tmp: Path) -> Path:
-    target = fixtures.cube_stl(tmp / "elsewhere" / "cube.stl")
-    link = tmp / "imports" / "model.stl"
-    link.parent.mkdir(parents=True, exist_ok=True)
-    os.symlink(target, link)
-    return link
-
-
-SUBMIT_CASES = [
-    Case("submit", ".off model", _submit(lambda t: _write(t / "a.off", "OFF\n3 1 0\n0 0 0\n"
-                                                          "1 0 0\n0 1 0\n3 0 1 2\n"))),
-    Case("submit", ".3mf model", _submit(lambda t: _write(t / "a.3mf", b"PK\x03\x04x" * 10))),
-    Case("submit", ".mesh model",
-         _submit(lambda t: _write(t / "a.mesh", "MeshVersionFormatted 1\n"))),
-    Case("submit", ".stl symlink to /etc/shadow", _submit(_link)),
-    Case("submit", ".stl symlink out of its folder", _submit(_link_outside)),
-    Case("submit", "garbage .vtu", _submit(lambda t: _write(t / "a.vtu", b"<?xml \x00\xff" * 5))),
-    Case("submit", "garbage .stl", _submit(lambda t: _write(t / "a.stl", bytes(range(256)) * 3))),
-    Case("submit", "job file with nan", lambda tmp: [
-        "job", "submit", str(fixtures.cube_stl(tmp / "c.stl")), "--job",
-        str(_write(tmp / "j.toml", "[slicing]\nsmoothness_weight = nan\n"))]),
-    Case("submit", "cell file with nan", lambda tmp: [
-        "job", "submit", str(fixtures.cube_stl(tmp / "c.stl")), "--cell",
-        str(_write(tmp / "c.toml", "[tank]\nyaw_deg = nan\n"))]),
-]
 
 ALL_CASES = (MESH_CASES + JOB_CASES + CELL_CASES + STAGE_CASES + GCODE_CASES + LAUNCH_CASES
              + SUBMIT_CASES)

@@ -179,9 +179,14 @@ def test_mutated_launch_files_are_accepted_or_refused_in_one_line(body: bytes) -
 GCODE_WORDS = st.tuples(st.sampled_from("GXYZEFIJM"), st.one_of(
     st.floats(allow_nan=False, allow_infinity=False, width=64), WEIRD_NUMBERS.filter(
         math.isfinite), st.integers(-3, 3)))
+# A printing move: mostly sane numbers, so that many programs are valid and get converted.
+SANE = st.floats(0.0, 50.0, allow_nan=False)
+PRINT_MOVE = st.tuples(SANE, SANE, st.floats(0.0, 2.0), st.floats(0.0, 0.5)).map(
+    lambda m: [("G", 1), ("X", m[0]), ("Y", m[1]), ("Z", m[2]), ("E", m[3])])
 
 
-@given(st.lists(st.lists(GCODE_WORDS, min_size=1, max_size=5), min_size=1, max_size=30))
+@given(st.lists(st.one_of(st.lists(GCODE_WORDS, min_size=1, max_size=5), PRINT_MOVE),
+                min_size=1, max_size=30))
 def test_random_gcode_is_parsed_or_refused_in_one_line(program: list[list[Any]]) -> None:
     text = "G21\nG90\nM83\n" + "".join(
         " ".join(f"{k}{v:.6g}" if isinstance(v, float) else f"{k}{v}" for k, v in line) + "\n"
