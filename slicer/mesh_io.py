@@ -341,13 +341,15 @@ def _check_size(vertices: np.ndarray, name: str, config: ModelConfig) -> None:
         raise InputError(
             f"{name} is {size:.4g} mm across, larger than {config.max_size_mm:g} mm "
             f"(read as {given})",
-            "if the file is in smaller units, say so with --units (mm, cm, m, in)",
+            "if the file is in smaller units, say so with --units (mm, cm, m, in) or "
+            "[model] units in the job file",
         )
     if size < config.min_size_mm:
         raise InputError(
             f"{name} is {size:.4g} mm across, smaller than {config.min_size_mm:g} mm "
             f"(read as {given})",
-            "if the file is in larger units, say so with --units (cm, m, in)",
+            "if the file is in larger units, say so with --units (cm, m, in) or [model] "
+            "units in the job file",
         )
 
 
