@@ -62,7 +62,8 @@ class Stage:
         ``MAX_ROWS``, or values the stage cannot hold (``check``)."""
         path = Path(job_dir) / cls.FILE
         arrays = load_npz(path, cls.SCHEMA)
-        fix = "re-run the stage that writes it"
+        writer = "mesp plan" if cls.FILE == "trajectory.npz" else "mesp slice"
+        fix = f"re-run the stage that writes it ({writer})"
         for name, arr in arrays.items():
             if name in cls.DTYPES and len(arr) > MAX_ROWS:
                 raise InputError(f"{path}: '{name}' has {len(arr):,} rows, more than {MAX_ROWS:,}",
