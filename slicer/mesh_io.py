@@ -32,6 +32,8 @@ TET_SUFFIXES = (".msh", ".vtk", ".vtu")
 SMALL_HOLE_FRACTION = 0.05
 # Below this volume (relative to the bounding-box diagonal cubed) the solid is flat.
 FLAT_VOLUME_FRACTION = 1e-9
+# A model file larger than this is refused before it is read (a binary STL of 20 M triangles).
+MAX_MODEL_BYTES = 1 << 30
 
 
 @dataclass(frozen=True, eq=False)
@@ -107,6 +109,9 @@ def _check_file(path: Path, suffixes: tuple[str, ...], what: str) -> None:
         )
     if path.stat().st_size == 0:
         raise InputError(f"{path} is empty (0 bytes)", "export the model again")
+    if path.stat().st_size > MAX_MODEL_BYTES:
+        raise InputError(f"{path} is {path.stat().st_size / 2**30:.1f} GiB, larger than "
+                         f"{MAX_MODEL_BYTES >> 30} GiB", "decimate the mesh before exporting it")
 
 
 def _looks_like_stl(path: Path) -> bool:
