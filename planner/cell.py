@@ -15,7 +15,7 @@ from typing import Literal
 
 import numpy as np
 
-from slicer.configtools import build, merge, read_toml
+from slicer.configtools import build, merge, read_ranges, read_toml
 
 Vec3 = tuple[float, float, float]
 
@@ -276,4 +276,6 @@ def load_cell(path: Path | None = None) -> CellConfig:
         user = read_toml(Path(path))
         # a user's tool.parts list replaces the default list as a whole (merge is per key)
         data = merge(data, user)
-    return build(CellConfig, data, "cell")
+    ranges = read_ranges(resources.files("planner").joinpath("cell_ranges.toml").read_text(),
+                         "planner/cell_ranges.toml")
+    return build(CellConfig, data, "cell", ranges, "planner/cell_ranges.toml")

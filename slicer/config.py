@@ -10,7 +10,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from slicer.configtools import build, merge, read_toml
+from slicer.configtools import build, merge, read_ranges, read_toml
 from slicer.errors import InputError
 
 UNIT_SCALE_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
@@ -203,9 +203,23 @@ class ToolpathConfig:
             raise ValueError("max_step_elevation_deg must be 0 (off) or up to 60 (deg)")
 
 
+_PROFILE_NAME = re.compile(r"^[a-z0-9][a-z0-9._-]{0,63}$")
+
+
 @dataclass(frozen=True)
 class ExtrusionConfig:
+    """The extrusion profile: a bundled name (``slicer/profiles/NAME.toml``) or the path of a
+    profile ``.toml``; nothing else is read (a name cannot leave the profiles folder)."""
+
     profile: str = "ecoflex-0030"
+
+    def __post_init__(self) -> None:
+        if self.profile.endswith(".toml") and len(self.profile) <= 4096:
+            return
+        if not _PROFILE_NAME.match(self.profile) or self.profile.endswith(".toml"):
+            raise ValueError(f"profile = {self.profile!r} is neither a bundled profile name "
+                             "nor a path ending in .toml; name one (e.g. ecoflex-0030) or give "
+                             "a profile .toml")
 
 
 @dataclass(frozen=True)
@@ -221,11 +235,13 @@ class JobConfig:
     def with_overrides(self, **sections: dict[str, Any]) -> JobConfig:
         """A new config with some keys of some sections replaced, validated again."""
         data = {name: vars_of(getattr(self, name)) for name in sections}
+        ranges = job_ranges()
         out = self
         for name, changes in sections.items():
             merged = {**data[name], **changes}
             section_cls = type(getattr(self, name))
-            out = replace(out, **{name: build(section_cls, merged, name)})
+            own = {k[len(name) + 1:]: v for k, v in ranges.items() if k.startswith(f"{name}.")}
+            out = replace(out, **{name: build(section_cls, merged, name, own, RANGES_FILE)})
         return out
 
 
@@ -242,9 +258,23 @@ def default_data() -> dict[str, Any]:
     return tomllib.loads(text)
 
 
+RANGES_FILE = "slicer/ranges.toml"
+
+
+def job_ranges() -> dict[str, tuple[float, float]]:
+    """The accepted range of every number of a job (``slicer/ranges.toml``)."""
+    text = resources.files("slicer").joinpath("ranges.toml").read_text()
+    return read_ranges(text, RANGES_FILE)
+
+
 def load_job(path: Path | None = None) -> JobConfig:
-    """The defaults, overridden by the job file at ``path`` if given."""
+    """The defaults, overridden by the job file at ``path`` if given; every number finite and
+    within its range (``slicer/ranges.toml``), the extrusion profile readable."""
+    from slicer.extrusion import load_profile
+
     data = default_data()
     if path is not None:
         data = merge(data, read_toml(path))
-    return build(JobConfig, data, "job")
+    job = build(JobConfig, data, "job", job_ranges(), RANGES_FILE)
+    load_profile(job.extrusion.profile)  # read and checked now, not after the tet mesh
+    return job

@@ -15,6 +15,7 @@ import tomli_w
 import trimesh
 
 from slicer.artifacts import atomic_write_bytes
+from slicer.budget import check_budget
 from slicer.config import JobConfig
 from slicer.configtools import to_dict
 from slicer.errors import InputError
@@ -54,6 +55,7 @@ def slice_model(
         else:
             given = None
             surface = mesh_io.load_surface(model, units=job.model)
+        check_budget(surface.bbox_mm, job)
         _save_surface(surface, out_dir / "model.ply")
     report["model"] = {
         "volume_mm3": surface.volume_mm3,

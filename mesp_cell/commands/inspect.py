@@ -116,8 +116,9 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"{name} {value} is out of range", "use 0 to 10 s, e.g. 0.2")
     if args.gcode is not None and not Path(args.gcode).is_file():
         raise InputError(f"G-code file {args.gcode} does not exist", "check the --gcode path")
-    if args.filament < 0:
-        raise InputError(f"--filament {args.filament} is negative", "use a diameter, or 0")
+    if not (np.isfinite(args.filament) and 0.0 <= args.filament <= 10.0):
+        raise InputError(f"--filament {args.filament} is out of range",
+                         "use a diameter of 0 to 10 mm (0: E is a volume in mm^3)")
     for name, value, lo, hi in (("--baseline-height", args.baseline_height, 0.02, 20.0),
                                 ("--baseline-beta", args.baseline_beta, 0.1, 1.0)):
         if value is not None and not lo <= value <= hi:

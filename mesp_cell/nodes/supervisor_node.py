@@ -36,6 +36,7 @@ from mesp_cell.messages import (
     WaypointReached,
 )
 from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
+from mesp_cell.step_timeouts import plan_timeout, slice_timeout
 from slicer.errors import InputError
 
 log = logging.getLogger("mesp.supervisor")
@@ -63,8 +64,9 @@ class SupervisorNode(LifecycleNode):
         self.time_scale = float(p.get("time_scale", 1.0))
         self.settle_s = float(p.get("settle_s", 0.05))  # wall s for a switch-on to show
         self.names = {k: p.get(k, k) for k in ("robot", "extruder", "slicer", "planner")}
-        self.timeouts = {"slice": float(p.get("slice_timeout_s", 3600.0)),
-                         "plan": float(p.get("plan_timeout_s", 3600.0)),
+        # 0 = sized to each job (mesp_cell.step_timeouts)
+        self.timeouts = {"slice": float(p.get("slice_timeout_s", 0.0)),
+                         "plan": float(p.get("plan_timeout_s", 0.0)),
                          "move": float(p.get("move_timeout_s", 120.0))}
         self.poll_s = float(p.get("poll_s", 0.1))
         self.alive: set[str] = set()
@@ -204,13 +206,41 @@ class SupervisorNode(LifecycleNode):
         node = self.names["slicer" if verb == "slice" else "planner"]
         if node not in self.alive:
             return
-        reply = self._request(node, Command.make(verb, job.id, model=job.model,
-                                                 job_file=job.job_file, cell_file=job.cell_file,
-                                                 dir=job.dir), self.timeouts[verb])
+        reply = self._request_while_alive(
+            node, Command.make(verb, job.id, model=job.model, job_file=job.job_file,
+                               cell_file=job.cell_file, dir=job.dir),
+            self._step_timeout(verb, job))
         if reply.ok:
             self.store.transition(job.id, next_state, expect=job.state)
         else:
             self.store.transition(job.id, "failed", f"{verb}: {reply.reason}")
+
+    def _request_while_alive(self, node: str, cmd: Command, timeout: float) -> Reply:
+        """``_request``, given up as soon as ``node`` leaves the bus (its process died or
+        stopped on a dead worker): the job fails at once instead of after ``timeout``."""
+        stopped = Reply.refuse(f"the {node} node stopped while working on the job (see its "
+                               "log; the launcher restarts it)")
+        box: list[Reply] = []
+        start = time.monotonic()
+        asker = threading.Thread(target=lambda: box.append(self._request(node, cmd, timeout)),
+                                 name=f"{self.name}-ask-{node}", daemon=True)
+        asker.start()
+        while asker.is_alive():
+            asker.join(0.1)
+            if asker.is_alive() and node not in self.alive:
+                return stopped
+        early = time.monotonic() - start < 0.9 * timeout
+        # a query dropped unanswered long before the timeout: the node's worker died with it
+        return stopped if early and not box[0].ok and "no reply" in box[0].reason else box[0]
+
+    def _step_timeout(self, verb: str, job: JobRecord) -> float:
+        """The launch's fixed timeout for ``verb`` if it sets one, else one sized to the job
+        (``mesp_cell.step_timeouts``; an unreadable model fails the job here)."""
+        if self.timeouts.get(verb):
+            return self.timeouts[verb]
+        if verb == "slice":
+            return slice_timeout(Path(job.model), Path(job.job_file) if job.job_file else None)
+        return plan_timeout(Path(job.dir))
 
     def _print(self, job: JobRecord) -> None:
         resume = job.state in ("paused", "interrupted")

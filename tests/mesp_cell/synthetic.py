@@ -84,3 +84,27 @@ def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
         return adapters.plan_job(job_dir, cell_file)
     save_npz(Path(job_dir) / "trajectory.npz", trajectory_arrays(LAYERS * PER_LAYER))
     return {}
+
+
+def write_cube(path: Path, size_mm: float = 20.0) -> Path:
+    """A closed cube STL of ``size_mm`` (the model a submission loads and checks)."""
+    import trimesh
+
+    trimesh.creation.box(extents=[size_mm] * 3).export(path)
+    return path
+
+
+class WorkerKilled(BaseException):
+    """Not an Exception: nothing on the bus worker's way catches it, so its thread dies."""
+
+
+def slice_by_name(model: Path, job_file: Path | None, out_dir: Path) -> dict[str, Any]:
+    """``slice_job``, except for a model named ``exits*`` (a library calling ``sys.exit``, as
+    meshio does on a garbage .vtu) or ``kills*`` (an error that kills the worker thread)."""
+    import sys
+
+    if Path(model).name.startswith("exits"):
+        sys.exit(1)
+    if Path(model).name.startswith("kills"):
+        raise WorkerKilled("the worker thread dies")
+    return slice_job(model, job_file, out_dir)

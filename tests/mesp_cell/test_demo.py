@@ -20,6 +20,7 @@ import pytest
 
 from slicer.artifacts import save_npz
 from slicer.stages import Toolpath
+from tests.mesp_cell import synthetic
 
 HOME = np.radians([0.0, -100.0, 100.0, -90.0, -90.0, 0.0])
 PATHS = 40          # deposition paths
@@ -102,7 +103,7 @@ def test_short_paths_print_completely_at_high_time_scale(tmp_path: Path) -> None
     old = os.environ.get("MESP_HOME")
     os.environ["MESP_HOME"] = str(tmp_path / "home")
     model = tmp_path / "part.stl"
-    model.write_text("solid part\nendsolid part\n")
+    synthetic.write_cube(model)  # a real model: submit loads it
     lock = threading.Lock()
     waypoints: list[int] = []
     states: list[ExtruderState] = []

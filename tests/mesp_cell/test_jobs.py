@@ -11,6 +11,7 @@ import pytest
 from mesp_cell.jobs import JobStore, check_submission
 from mesp_cell.launcher import CellClient
 from slicer.errors import InputError
+from tests.mesp_cell import synthetic
 
 
 @pytest.fixture
@@ -21,7 +22,7 @@ def store(tmp_path: Path) -> JobStore:
 @pytest.fixture
 def model(tmp_path: Path) -> Path:
     p = tmp_path / "My Part.stl"
-    p.write_text("solid x\nendsolid x\n")
+    synthetic.write_cube(p)  # a real model: submit loads it
     return p
 
 
@@ -134,3 +135,28 @@ def test_waiting_without_progress_times_out_but_a_print_that_advances_does_not(
     worker.join()
     assert done.state == "done" and done.waypoint == 23
     client.close()
+
+
+def test_job_ids_are_made_by_the_store_and_stay_in_its_folder(store: JobStore,
+                                                              tmp_path: Path) -> None:
+    import inspect
+
+    assert "job_id" not in inspect.signature(store.submit).parameters
+    odd = tmp_path / "..%2F..%2Fx .. ; rm -rf.stl"
+    synthetic.write_cube(odd)
+    job = store.submit(odd, "sim", tmp_path / "jobs")
+    assert Path(job.dir).resolve().parent == (tmp_path / "jobs").resolve()
+    assert all(c.isalnum() or c == "-" for c in job.id)
+
+
+def test_submission_refuses_what_the_slicer_cannot_read(tmp_path: Path) -> None:
+    import os
+
+    for name, body in (("a.off", b"OFF\n"), ("a.3mf", b"PK"), ("a.mesh", b"Mesh"),
+                       ("a.vtu", b"<?xml \x00\xff")):
+        (tmp_path / name).write_bytes(body)
+        with pytest.raises(InputError):
+            check_submission(tmp_path / name)
+    os.symlink("/etc/shadow", tmp_path / "shadow.stl")
+    with pytest.raises(InputError, match="outside its folder"):
+        check_submission(tmp_path / "shadow.stl")
