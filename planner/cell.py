@@ -16,6 +16,7 @@ from typing import Literal
 import numpy as np
 
 from slicer.configtools import build, merge, read_toml
+from slicer.errors import InputError
 
 Vec3 = tuple[float, float, float]
 
@@ -215,7 +216,6 @@ class PlanningConfig:
     travel_speed_mm_s: float = 40.0
     transfer_speed_mm_s: float = 250.0
     approach_above_gel_mm: float = 30.0
-    extrusion_rate_mm3_s: float = 6.57
 
     def __post_init__(self) -> None:
         if not 0 <= self.alpha_min_deg <= 90 <= self.alpha_max_deg <= 180:
@@ -236,8 +236,6 @@ class PlanningConfig:
             raise ValueError("max_step_mm and travel_speed_mm_s must be positive")
         if self.approach_above_gel_mm <= 0 or self.transfer_speed_mm_s <= 0:
             raise ValueError("approach_above_gel_mm and transfer_speed_mm_s must be positive")
-        if self.extrusion_rate_mm3_s <= 0:
-            raise ValueError("extrusion_rate_mm3_s must be positive")
 
 
 @dataclass(frozen=True)
@@ -274,6 +272,10 @@ def load_cell(path: Path | None = None) -> CellConfig:
     data = default_cell_data()
     if path is not None:
         user = read_toml(Path(path))
+        if "extrusion_rate_mm3_s" in user.get("planning", {}):
+            raise InputError(f"{path}: [planning] extrusion_rate_mm3_s is no cell setting: C "
+                             "belongs to the extrusion profile the job is sliced with",
+                             "delete the line; set C with `mesp calibrate extrusion`")
         # a user's tool.parts list replaces the default list as a whole (merge is per key)
         data = merge(data, user)
     return build(CellConfig, data, "cell")

@@ -213,6 +213,7 @@ def _toolpath(
         toolpath, relief = relieve_bends(toolpath, job.toolpath.max_step_elevation_deg)
         report["bend_relief"] = relief.as_dict()
     toolpath.save(out_dir)
+    profile.save_to_job(out_dir)  # the job's C, set-point and morphology: one owner, recorded
     export_layers_txt(toolpath, out_dir / "layers_txt")
     write_toolpath_figures(result, layers, out_dir / "figures")
     deposited = float(report["deposited_volume_mm3"])

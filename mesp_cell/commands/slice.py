@@ -60,14 +60,21 @@ def register(sub: Any) -> None:
         default="toolpath",
         help="stop after this stage (default: toolpath)",
     )
+    p.add_argument("--on", metavar="CELL", default=None,
+                   help="the cell whose active extrusion profile the job's profile \"active\" "
+                   "is (`mesp profile`; default: the only cell running, else 'sim')")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=run)
 
 
 def job_from_args(args: argparse.Namespace) -> JobConfig:
     """The job file (or defaults) with the command-line overrides applied and validated."""
+    from mesp_cell import profiles
+
     job = load_job(args.job)
-    overrides: dict[str, dict[str, Any]] = {}
+    cell = getattr(args, "on", None) or profiles.default_cell()
+    overrides: dict[str, dict[str, Any]] = {
+        "extrusion": {"profile": profiles.resolve(job.extrusion.profile, cell)}}
     if args.units:
         overrides["model"] = {"units": args.units}
     if args.edge_length is not None:

@@ -32,7 +32,8 @@ class SlicerNode(LifecycleNode):
         # Commands arrive one at a time on the bus worker thread: one job at a time.
         out = Path(cmd.arg("dir"))
         job_file = cmd.arg("job_file") or None
-        self.fn(Path(cmd.arg("model")), Path(job_file) if job_file else None, out)
+        self.fn(Path(cmd.arg("model")), Path(job_file) if job_file else None, out,
+                self.bus_config.cell)
         path = out / "toolpath.npz"
         if not path.is_file():
             return Reply.refuse(f"slicing wrote no {path}")
