@@ -116,25 +116,30 @@ def check_mass(run: int, seconds: float, mass: float, expected_rate: float, dens
 
 
 def check_consistency(seconds: ArrayLike, mass: ArrayLike, tolerance: float) -> str:
-    """'' if every run agrees with the line through the others within ``tolerance`` (a
-    fraction of its mass), else the run that disagrees most and by how much."""
+    """'' if the runs agree, else which one does not and by how much: the run whose removal
+    leaves the straightest line of the others (ties: the furthest from that line) is off
+    by more than ``tolerance`` (a fraction of its mass) from it."""
     t = np.asarray(seconds, dtype=np.float64)
     m = np.asarray(mass, dtype=np.float64)
     n = t.size
     if n < MIN_RUNS:
         return ""
-    dev = np.zeros(n)
-    for i in range(n):  # n is a handful of runs: leave-one-out, one line each
+    best: tuple[float, float, int, float] | None = None
+    for i in range(n):  # a handful of runs: leave-one-out, one line each
         keep = np.arange(n) != i
         if np.unique(t[keep]).size < 2:
             continue
         slope, intercept, _ = _line(t[keep], m[keep])
-        dev[i] = m[i] / (slope * t[i] + intercept) - 1.0
-    worst = int(np.argmax(np.abs(dev)))
-    if abs(dev[worst]) <= tolerance:
+        ssr = float(np.sum((m[keep] - slope * t[keep] - intercept) ** 2))
+        dev = float(m[i] / (slope * t[i] + intercept) - 1.0)
+        key = (round(ssr, 12), -abs(dev), i, dev)
+        if best is None or key < best:
+            best = key
+    if best is None or -best[1] <= tolerance:
         return ""
-    return (f"run {worst + 1} ({t[worst]:g} s, {m[worst]:.4g} g) disagrees with the other runs "
-            f"by {dev[worst]:+.1%} (more than {tolerance:.0%})")
+    i, dev = best[2], best[3]
+    return (f"run {i + 1} ({t[i]:g} s, {m[i]:.4g} g) disagrees with the other runs "
+            f"by {dev:+.1%} (more than {tolerance:.0%})")
 
 
 def run_extrusion(driver: ExtruderDriver, setpoint: float, seconds: Sequence[float],

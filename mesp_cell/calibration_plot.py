@@ -58,10 +58,17 @@ def plot_morphology(fit: MorphologyFit, speed: np.ndarray, width: np.ndarray,
     v = np.geomspace(float(fit.speed[0]), float(fit.speed[-1]), 100)
     ax.loglog(speed, width, "o", color="tab:blue", label="measured width $w_f$")
     ax.loglog(v, fit.a_w * v**fit.b_w, color="tab:blue",
-              label=f"$w_f$ = {fit.a_w:.3g} v^{fit.b_w:.3f} (R$^2$ {fit.r2_w:.3f})")
+              label=f"$w_f$ = {fit.a_w:.3g} $v^{{{fit.b_w:.3f}}}$ (R$^2$ {fit.r2_w:.3f})")
     ax.loglog(speed, height, "s", color="tab:orange", label="measured height $h_f$")
     ax.loglog(v, fit.a_h * v**fit.b_h, color="tab:orange",
-              label=f"$h_f$ = {fit.a_h:.3g} v^{fit.b_h:.3f} (R$^2$ {fit.r2_h:.3f})")
+              label=f"$h_f$ = {fit.a_h:.3g} $v^{{{fit.b_h:.3f}}}$ (R$^2$ {fit.r2_h:.3f})")
+    from matplotlib.ticker import NullFormatter, ScalarFormatter
+
+    ax.set_xticks(np.unique(speed))  # the measured speeds
+    ax.xaxis.set_major_formatter(ScalarFormatter())
+    ax.xaxis.set_minor_formatter(NullFormatter())
+    ax.yaxis.set_major_formatter(ScalarFormatter())
+    ax.yaxis.set_minor_formatter(ScalarFormatter())
     ax.set_xlabel("nozzle speed v (mm/s)")
     ax.set_ylabel("filament size (mm)")
     ax.grid(alpha=0.3, which="both")
