@@ -67,7 +67,8 @@ def profile_line(job: JobRecord) -> str:
     active = profiles.active(job.cell)
     recorded = Path(job.dir) / PROFILE_FILE
     if not recorded.is_file():
-        return f"  profile: not sliced yet; cell '{job.cell}' prints with {profiles.describe(active)}"
+        return (f"  profile: not sliced yet; cell '{job.cell}' prints with "
+                f"{profiles.describe(active)}")
     mine = load_profile(recorded)
     if mine.sha256 == active.sha256:
         return f"  profile {profiles.describe(mine)} (the cell's active profile)"

@@ -10,8 +10,9 @@ samples ``start`` .. ``end`` - 1 (default: to the end) and
 switches the extruder ``lead_s`` ahead of every change of deposition, on the servo clock (lead
 compensation of the extruder's flow response); while depositing it also scales the rate with
 the arm's planned speed, ``lead_s`` ahead (``set_rate`` to the set-point x
-``StreamPlan.flow_at``, when it moves by more than FLOW_STEP of it, at most every FLOW_INTERVAL_S of wall time), so the ink per
-millimetre stays the slicer's where the planner slowed the arm (``sync_flow``, default on);
+``StreamPlan.flow_at``, when it moves by more than FLOW_STEP of it, at most every
+FLOW_INTERVAL_S of wall time), so the ink per millimetre stays the slicer's where the planner
+slowed the arm (``sync_flow``, default on);
 ``stop``; ``reset`` clears a latched e-stop.
 Motions run in one motion thread; their end is published as a ``StreamEvent`` on
 ``robot/event``. Interlocks, checked before every servo sample: no e-stop,

@@ -110,7 +110,8 @@ def test_good_custom_profile_and_missing_key() -> None:
 def test_load_by_path_and_errors(tmp_path: Path) -> None:
     path = tmp_path / "p.toml"
     path.write_text(
-        'rate_mm3_s = 5.0\nsetpoint_mm3_s = 4.5\nbeta = 0.6\n[morphology]\nspeed_mm_s = [1.0, 3.0]\n'
+        'rate_mm3_s = 5.0\nsetpoint_mm3_s = 4.5\nbeta = 0.6\n'
+        '[morphology]\nspeed_mm_s = [1.0, 3.0]\n'
         'filament_width_mm = [2.0, 1.0]\nfilament_height_mm = [1.5, 0.9]\n'
     )
     prof = load_profile(path)
