@@ -12,6 +12,10 @@ import numpy as np
 
 from slicer.configtools import build, merge, read_toml
 from slicer.errors import InputError
+from slicer.toml_defaults import table
+
+# every field default below comes from the one defaults file
+_JOB = table("slicer", "defaults.toml")
 
 UNIT_SCALE_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 
@@ -88,9 +92,9 @@ class CriticalSelector:
 
 @dataclass(frozen=True)
 class ModelConfig:
-    units: Literal["mm", "cm", "m", "in"] = "mm"
-    max_size_mm: float = 2000.0
-    min_size_mm: float = 1.0
+    units: Literal["mm", "cm", "m", "in"] = _JOB["model"]["units"]
+    max_size_mm: float = _JOB["model"]["max_size_mm"]
+    min_size_mm: float = _JOB["model"]["min_size_mm"]
 
     def __post_init__(self) -> None:
         if not 0 < self.min_size_mm < self.max_size_mm:
@@ -107,12 +111,12 @@ MAX_REFINE = 3  # red refinements after fTetWild (each multiplies the tets by 8)
 
 @dataclass(frozen=True)
 class MeshConfig:
-    edge_length_mm: float = 1.2
-    epsilon: float = 2e-3
-    stop_energy: float = 20.0
-    optimize_iterations: int = 10
-    coarsen: bool = False
-    refine: int | Literal["auto"] = "auto"
+    edge_length_mm: float = _JOB["mesh"]["edge_length_mm"]
+    epsilon: float = _JOB["mesh"]["epsilon"]
+    stop_energy: float = _JOB["mesh"]["stop_energy"]
+    optimize_iterations: int = _JOB["mesh"]["optimize_iterations"]
+    coarsen: bool = _JOB["mesh"]["coarsen"]
+    refine: int | Literal["auto"] = _JOB["mesh"]["refine"]
 
     def __post_init__(self) -> None:
         if self.refine != "auto" and self.refine not in range(MAX_REFINE + 1):
@@ -129,12 +133,12 @@ class MeshConfig:
 
 @dataclass(frozen=True)
 class SlicingConfig:
-    layer_height_mm: float = 0.6
-    critical: tuple[str, ...] = ("bottom:45",)
-    planar: bool = False
-    max_iterations: int = 30
-    convergence: float = 1e-2
-    smoothness_weight: float = 1.0
+    layer_height_mm: float = _JOB["slicing"]["layer_height_mm"]
+    critical: tuple[str, ...] = _JOB["slicing"]["critical"]
+    planar: bool = _JOB["slicing"]["planar"]
+    max_iterations: int = _JOB["slicing"]["max_iterations"]
+    convergence: float = _JOB["slicing"]["convergence"]
+    smoothness_weight: float = _JOB["slicing"]["smoothness_weight"]
 
     def __post_init__(self) -> None:
         if not 0.01 <= self.layer_height_mm <= 20.0:
@@ -156,21 +160,21 @@ class SlicingConfig:
 
 @dataclass(frozen=True)
 class ToolpathConfig:
-    first_pattern: Literal["contour", "stripe"] = "contour"
-    waypoint_spacing: float = 0.333
-    deformation_iterations: int = 200
-    deformation_tolerance: float = 0.01
-    volume_tolerance: float = 0.005
-    min_path_length_mm: float = 1.0
-    join_factor: float = 3.0
-    fit_bands: bool = True
-    pitch_width: bool = True
-    flush: bool = True
-    stripe_perimeter: bool = False
-    first_layer_beta: float = 0.0
-    boundary_distance: Literal["eikonal", "heat"] = "eikonal"
-    measure_baselines: bool = True
-    max_step_elevation_deg: float = 20.0
+    first_pattern: Literal["contour", "stripe"] = _JOB["toolpath"]["first_pattern"]
+    waypoint_spacing: float = _JOB["toolpath"]["waypoint_spacing"]
+    deformation_iterations: int = _JOB["toolpath"]["deformation_iterations"]
+    deformation_tolerance: float = _JOB["toolpath"]["deformation_tolerance"]
+    volume_tolerance: float = _JOB["toolpath"]["volume_tolerance"]
+    min_path_length_mm: float = _JOB["toolpath"]["min_path_length_mm"]
+    join_factor: float = _JOB["toolpath"]["join_factor"]
+    fit_bands: bool = _JOB["toolpath"]["fit_bands"]
+    pitch_width: bool = _JOB["toolpath"]["pitch_width"]
+    flush: bool = _JOB["toolpath"]["flush"]
+    stripe_perimeter: bool = _JOB["toolpath"]["stripe_perimeter"]
+    first_layer_beta: float = _JOB["toolpath"]["first_layer_beta"]
+    boundary_distance: Literal["eikonal", "heat"] = _JOB["toolpath"]["boundary_distance"]
+    measure_baselines: bool = _JOB["toolpath"]["measure_baselines"]
+    relieve_bends: bool = _JOB["toolpath"]["relieve_bends"]
 
     def __post_init__(self) -> None:
         if self.boundary_distance not in ("eikonal", "heat"):
@@ -189,13 +193,11 @@ class ToolpathConfig:
             raise ValueError("min_path_length_mm must be >= 0")
         if self.first_layer_beta != 0.0 and not 0.3 <= self.first_layer_beta <= 1.0:
             raise ValueError("first_layer_beta must be 0 (the profile's beta) or in [0.3, 1]")
-        if not 0.0 <= self.max_step_elevation_deg <= 60.0:
-            raise ValueError("max_step_elevation_deg must be 0 (off) or up to 60 (deg)")
 
 
 @dataclass(frozen=True)
 class ExtrusionConfig:
-    profile: str = "ecoflex-0030"
+    profile: str = _JOB["extrusion"]["profile"]
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ from typing import Any
 
 from slicer.errors import InputError
 
-SliceFn = Callable[[Path, Path | None, Path, str], dict[str, Any]]
+SliceFn = Callable[[Path, Path | None, Path, str, Path | None], dict[str, Any]]
 PlanFn = Callable[[Path, Path | None], dict[str, Any]]
 
 
@@ -31,12 +31,15 @@ def resolve(spec: str) -> Callable[..., dict[str, Any]]:
     return fn
 
 
-def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str) -> dict[str, Any]:
+def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
+              cell_file: Path | None = None) -> dict[str, Any]:
     """Slice ``model`` with the job file (None = defaults) into ``out_dir``; the report.
 
-    The job's profile "active" is ``cell``'s active calibration (``mesp_cell.profiles``).
+    The job's profile "active" is ``cell``'s active calibration (``mesp_cell.profiles``); the
+    step limits follow the alpha range of the cell file the job is planned in (None = bundled).
     """
     from mesp_cell import profiles
+    from planner.cell import load_cell
     from slicer import pipeline
     from slicer.config import load_job
 
@@ -46,7 +49,8 @@ def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str) -> d
     job = load_job(Path(job_file) if job_file else None)
     job = job.with_overrides(extrusion={"profile": profiles.resolve(job.extrusion.profile, cell)})
     fn = getattr(pipeline, "slice_job", None) or pipeline.slice_model
-    report: dict[str, Any] = fn(model, Path(out_dir), job)
+    alpha = load_cell(Path(cell_file) if cell_file else None).planning.alpha_range
+    report: dict[str, Any] = fn(model, Path(out_dir), job, alpha=alpha)
     return report
 
 

@@ -63,7 +63,8 @@ def trajectory_arrays(n_waypoints: int, q_offset: float = 0.0) -> dict[str, np.n
             "base_T": np.eye(4), "tool_T": np.eye(4), "model_T": np.eye(4)}
 
 
-def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str) -> dict[str, Any]:
+def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
+              cell_file: Path | None = None) -> dict[str, Any]:
     """Stands in for the slicing pipeline: refuses a missing model, writes toolpath.npz and
     records the cell's active extrusion profile."""
     from mesp_cell.profiles import active

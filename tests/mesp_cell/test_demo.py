@@ -73,7 +73,8 @@ def deposition_s() -> float:
     return PATHS * PER_PATH * STEP / RATE_HZ
 
 
-def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str) -> dict[str, Any]:
+def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
+              cell_file: Path | None = None) -> dict[str, Any]:
     """Stands in for the slicing pipeline (launch override ``slice_fn``)."""
     from mesp_cell.profiles import active
 
