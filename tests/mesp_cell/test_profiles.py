@@ -78,3 +78,20 @@ def test_profile_cli(home: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert "calibrated extrusion 2026-11-27T09:30" in out
     assert main(["profile", "activate", "missing"]) == 2
     assert capsys.readouterr().err.startswith("mesp: error: no profile 'missing'")
+
+
+def test_job_status_shows_the_jobs_and_the_cells_profile(home: Path, tmp_path: Path) -> None:
+    from mesp_cell.commands.job import profile_line
+    from mesp_cell.jobs import JobStore
+
+    store = JobStore(home / "jobs.sqlite")
+    model = tmp_path / "part.stl"
+    model.write_text("solid p\nendsolid p\n")
+    job = store.submit(model, "sim", home / "jobs")
+    assert "not sliced yet; cell 'sim' prints with ecoflex-0030" in profile_line(job)
+    profiles.active("sim").save_to_job(Path(job.dir))
+    assert "(the cell's active profile)" in profile_line(job)
+    profiles.save(_calibrated("lab-a"), "lab-a")
+    profiles.activate("lab-a", "sim")
+    assert "not the cell's active profile lab-a" in profile_line(job)
+    store.close()
