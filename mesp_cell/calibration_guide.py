@@ -64,11 +64,15 @@ class Guide:
         if self.scale is not None:
             self.tare = self.scale.grams()
             self.say(f"  tare {self.tare:.4f} g")
-        if not self.yes:
+        if not self.yes and self.out.isatty():
             for k in range(self.countdown_s, 0, -1):
                 print(f"\r  starting in {k} ", end="", file=self.out, flush=True)
                 time.sleep(1.0)
             print("\r  extruding        ", file=self.out, flush=True)
+        elif not self.yes:
+            self.say(f"  starting in {self.countdown_s} s")
+            time.sleep(self.countdown_s)
+            self.say("  extruding")
         self._shown = -1.0
 
     def during_run(self, i: int, elapsed: float, seconds: float) -> None:
