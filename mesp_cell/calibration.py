@@ -77,16 +77,23 @@ def _line(t: NDArray[np.float64], m: NDArray[np.float64]) -> tuple[float, float,
     return float(slope), float(intercept), se
 
 
+def check_runs(seconds: ArrayLike) -> None:
+    """Refuse run times that cannot give C and its uncertainty (before anything runs)."""
+    t = np.asarray(seconds, dtype=np.float64).ravel()
+    if t.size < MIN_RUNS or np.unique(t).size < 2:
+        raise InputError(f"{t.size} run(s) of {np.unique(t).size} length(s) give no "
+                         "uncertainty of the rate",
+                         f"weigh at least {MIN_RUNS} runs of at least 2 lengths, e.g. "
+                         "--seconds 30,60,90,120")
+
+
 def fit_rate(seconds: ArrayLike, mass: ArrayLike, density: float, setpoint: float) -> RateFit:
     """Fit ``mass = rho (C t + V0)`` over the runs (module docstring)."""
     t = np.asarray(seconds, dtype=np.float64).ravel()
     m = np.asarray(mass, dtype=np.float64).ravel()
     if t.shape != m.shape:
         raise InputError(f"{t.size} run times but {m.size} masses", "give one mass per run")
-    if t.size < MIN_RUNS or np.unique(t).size < 2:
-        raise InputError(f"{t.size} runs of {np.unique(t).size} different lengths",
-                         f"weigh at least {MIN_RUNS} runs of at least 2 lengths, e.g. "
-                         "--seconds 30,60,90,120")
+    check_runs(t)
     if not density > 0:
         raise InputError(f"density {density} g/cm^3 is not positive", "give --density")
     if np.any(~np.isfinite(m)) or np.any(m <= 0) or np.any(t <= 0):

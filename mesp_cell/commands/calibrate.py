@@ -159,7 +159,7 @@ def _read_masses(path: Path) -> tuple[list[float], list[float]]:
 
 
 def extrusion(args: argparse.Namespace) -> int:
-    from mesp_cell.calibration import check_consistency, check_mass, fit_rate
+    from mesp_cell.calibration import check_consistency, check_mass, check_runs, fit_rate
     from mesp_cell.calibration_plot import plot_rate
     from mesp_cell.profile_write import calibrated_text
 
@@ -184,6 +184,7 @@ def extrusion(args: argparse.Namespace) -> int:
                 raise InputError(why, f"fix {args.masses} or redo that run")
     else:
         seconds = _list(args.seconds, "--seconds")
+        check_runs(seconds)  # before the extruder runs
         masses = _run(args, seconds, setpoint, density, expected_rate, check)
     why = check_consistency(seconds, masses, args.consistency)
     if why:

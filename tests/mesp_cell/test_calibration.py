@@ -62,7 +62,7 @@ def test_rate_fit_is_exact_on_a_line_and_its_uncertainty_follows_the_scatter() -
     # residuals +-1 mg over 2 degrees of freedom: s = 1.414 mg, Sxx = 4500 s^2
     assert noisy.u_C == pytest.approx(np.sqrt(4e-6 / 2 / 4500) / (DENSITY / 1000), rel=1e-6)
     assert noisy.expanded(0.95) == pytest.approx(4.303 * noisy.u_C, rel=1e-3)
-    with pytest.raises(InputError, match="at least 3 runs"):
+    with pytest.raises(InputError, match=r"2 run\(s\) of 2 length\(s\) give no uncertainty"):
         fit_rate(t[:2], mass[:2], DENSITY, SETPOINT)
     with pytest.raises(InputError, match="no positive mass"):
         fit_rate(t, np.array([0.2, 0.0, 0.6, 0.8]), DENSITY, SETPOINT)
@@ -174,3 +174,6 @@ def test_cli_fits_a_masses_file_and_refuses_an_implausible_one(
     runs.write_text("seconds,mass_g\n30,0.2250\n60,0.4000\n90,0.6790\n120,0.9060\n")
     assert main(["calibrate", "extrusion", "--masses", str(runs)]) == 2
     assert "run 2 (60 s, 0.4 g) disagrees with the other runs" in capsys.readouterr().err
+    # too few runs is refused before the extruder moves (no extruder is even needed)
+    assert main(["calibrate", "extrusion", "--emulate", "1.0", "--yes", "--seconds", "30"]) == 2
+    assert "1 run(s) of 1 length(s)" in capsys.readouterr().err
