@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
@@ -28,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slicer.errors import InputError
+from slicer.extrusion import factory_rate
 from slicer.stages import MAX_COORDINATE_MM, PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
 
 MAX_GCODE_BYTES = 256 << 20  # a G-code file larger than this is refused before it is read
@@ -48,7 +49,7 @@ class GcodeOptions:
     """
 
     filament_diameter_mm: float = 1.75
-    rate_mm3_s: float = 6.57
+    rate_mm3_s: float = field(default_factory=factory_rate)  # the factory profile's C
     speed: Literal["volume", "feedrate"] = "volume"
     arc_step_mm: float = 0.5
 

@@ -11,6 +11,10 @@ record a checkpoint at every deposited waypoint, publish progress, stop the extr
 A stream that stops early (node lost, fault, e-stop) leaves the job ``interrupted`` with its
 checkpoint; ``resume`` restarts from it. Commands (``supervisor/cmd``): ``pause``,
 ``resume``, ``abort`` (job_id).
+
+The extrusion rate C and the set-point the extruder is commanded come from the profile the job
+was sliced with (its ``profile.toml``); a job whose profile is not the cell's active
+calibration (``mesp profile``) is refused before it is planned and again before it moves.
 """
 
 from __future__ import annotations
@@ -36,8 +40,11 @@ from mesp_cell.messages import (
     WaypointReached,
 )
 from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
+from mesp_cell.profiles import stale_reason
 from mesp_cell.step_timeouts import plan_timeout, slice_timeout
 from slicer.errors import InputError
+from slicer.extrusion import ExtrusionProfile, load_job_profile
+from slicer.report import update_report
 
 log = logging.getLogger("mesp.supervisor")
 
@@ -47,7 +54,7 @@ class Stopped(Exception):
 
 
 class SupervisorNode(LifecycleNode):
-    """See the module docstring. Parameters: jobs_db, rate (mm^3/s), lead_s, prime_s, dt,
+    """See the module docstring. Parameters: jobs_db, lead_s, prime_s, dt,
     time_scale (of the twin and the emulated extruder: ETA, lead and prime waits), settle_s,
     robot/extruder/slicer/planner (node names), slice_timeout_s, plan_timeout_s, move_timeout_s,
     poll_s."""
@@ -56,7 +63,8 @@ class SupervisorNode(LifecycleNode):
         p = self.params
         self.store = JobStore(Path(p["jobs_db"]))
         self.cell = self.bus_config.cell
-        self.rate = float(p.get("rate", 6.57))
+        self.setpoint = 0.0  # mm^3/s the extruder is commanded for the current job
+        self.true_per_nominal = 1.0  # C / set-point of the current job's profile
         self.lead_s = float(p.get("lead_s", 0.3))
         self.prime_s = float(p.get("prime_s", 0.5))
         self.dt = float(p.get("dt", 0.002))
@@ -181,6 +189,7 @@ class SupervisorNode(LifecycleNode):
                 if job.state == "submitted":
                     self._stage(job, "slice", "sliced")
                 elif job.state == "sliced":
+                    self._job_profile(job)
                     self._stage(job, "plan", "planned")
                 else:
                     why = self._need("robot", "extruder")
@@ -201,6 +210,16 @@ class SupervisorNode(LifecycleNode):
             self.store.transition(job_id, "failed", reason)
         except InputError:  # aborted by the operator meanwhile: that state stands
             log.info("job %s not failed (%s): %s", job_id, self.store.get(job_id).state, reason)
+
+    def _job_profile(self, job: JobRecord) -> ExtrusionProfile:
+        """The profile ``job`` was sliced with, if it is the cell's active calibration."""
+        profile = load_job_profile(Path(job.dir))
+        why = stale_reason(profile, self.cell)
+        if why:
+            raise InputError(why, "re-submit the job to slice it with the active profile, or "
+                             f"`mesp profile activate {Path(job.dir) / 'profile.toml'} --on "
+                             f"{self.cell}`")
+        return profile
 
     def _stage(self, job: JobRecord, verb: str, next_state: str) -> None:
         node = self.names["slicer" if verb == "slice" else "planner"]
@@ -247,6 +266,9 @@ class SupervisorNode(LifecycleNode):
         traj = Path(job.dir) / "trajectory.npz"
         if not traj.is_file():
             raise InputError(f"job {job.id} has no trajectory.npz", "re-submit the job")
+        profile = self._job_profile(job)
+        self.setpoint = profile.setpoint_mm3_s
+        self.true_per_nominal = profile.rate_mm3_s / profile.setpoint_mm3_s
         plan = StreamPlan.load(traj, self.dt)
         digest = sha256_of(traj)
         robot = self.names["robot"]
@@ -283,7 +305,7 @@ class SupervisorNode(LifecycleNode):
             self._extruder("clear")
             on = plan.extrude_at(min(start + lead_n, plan.samples - 1))
             if on:
-                self._extruder("start", rate=self.rate)
+                self._extruder("start", rate=self.setpoint)
                 # Lead and prime run on the extruder's (the twin's) clock; the switch-on must
                 # also show in the extruder state (wall-clock latency) before the stream starts.
                 wait = (self.lead_s + (0.0 if resume else self.prime_s)) / self.time_scale
@@ -295,7 +317,14 @@ class SupervisorNode(LifecycleNode):
             if ev.kind != "done":
                 raise Stopped(ev.reason or "stream stopped")
             self._move(job.id, to="home")
-            self.store.progress(job.id, 100.0, 0.0, self._volume(job, ext0))
+            volume = self._volume(job, ext0)
+            self.store.progress(job.id, 100.0, 0.0, volume)
+            update_report(Path(job.dir), {"print": {
+                "cell": self.cell, "volume_mm3": volume,
+                "profile": {"name": profile.name, "sha256": profile.sha256,
+                            "rate_mm3_s": profile.rate_mm3_s,
+                            "setpoint_mm3_s": profile.setpoint_mm3_s,
+                            "calibrated": profile.calibrated}}})
             self.store.transition(job.id, "done")
         except Stopped as exc:
             self._stopped(job, str(exc), ext0)
@@ -308,7 +337,7 @@ class SupervisorNode(LifecycleNode):
         """Stream samples ``start`` .. ``end`` - 1 (to the end by default) and follow it."""
         self._check_request()
         args: dict[str, Any] = {"start": start, "after_waypoint": after, "lead_s": self.lead_s,
-                                "rate": self.rate}
+                                "rate": self.setpoint}
         if end is not None:
             args["end"] = end
         reply = self._request(self.names["robot"], Command.make("stream", job.id, **args))
@@ -334,8 +363,10 @@ class SupervisorNode(LifecycleNode):
             log.warning("job %s stopped: %s", job.id, reason)
 
     def _volume(self, job: JobRecord, ext0: float) -> float:
+        """mm^3 extruded: the controller's totaliser (nominal) times the profile's C per
+        set-point (what weighing found it really delivers)."""
         now = self.extruder_state.volume if self.extruder_state else ext0
-        return job.volume + max(0.0, now - ext0)
+        return job.volume + max(0.0, now - ext0) * self.true_per_nominal
 
     def _drain(self, job_id: str) -> None:
         """Record the waypoints still queued (they may trail the stream's end event)."""

@@ -63,13 +63,17 @@ def trajectory_arrays(n_waypoints: int, q_offset: float = 0.0) -> dict[str, np.n
             "base_T": np.eye(4), "tool_T": np.eye(4), "model_T": np.eye(4)}
 
 
-def slice_job(model: Path, job_file: Path | None, out_dir: Path) -> dict[str, Any]:
-    """Stands in for the slicing pipeline: refuses a missing model, writes toolpath.npz."""
+def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
+              cell_file: Path | None = None) -> dict[str, Any]:
+    """Stands in for the slicing pipeline: refuses a missing model, writes toolpath.npz and
+    records the cell's active extrusion profile."""
+    from mesp_cell.profiles import active
     from slicer.errors import InputError
 
     if not Path(model).is_file():
         raise InputError(f"model {model} does not exist", "check the path")
     toolpath().save(Path(out_dir))
+    active(cell).save_to_job(Path(out_dir))  # the cell's calibration, as the real slicer
     return {}
 
 

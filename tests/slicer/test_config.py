@@ -37,7 +37,7 @@ def test_job_file_overrides_defaults(tmp_path: Path) -> None:
         ("[slicing]\ncritical = ['sideways']\n", "not understood"),
         ("[toolpath]\nboundary_distance = 'exact'\n", "boundary_distance"),
         ("[toolpath]\ndeformation_tolerance = 0.5\n", "deformation_tolerance"),
-        ("[toolpath]\nmax_step_elevation_deg = 90\n", "max_step_elevation_deg"),
+        ("[toolpath]\nmax_step_elevation_deg = 20\n", "max_step_elevation_deg"),  # cell's now
         ("[slicing]\ncritical = ['bottom@q<1']\n", "condition '@q<1' is not understood"),
         ("[slicing]\ncritical = ['bottom@z<1e']\n", "bad number"),
     ],
