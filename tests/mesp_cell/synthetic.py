@@ -102,7 +102,8 @@ class WorkerKilled(BaseException):
     """Not an Exception: nothing on the bus worker's way catches it, so its thread dies."""
 
 
-def slice_by_name(model: Path, job_file: Path | None, out_dir: Path) -> dict[str, Any]:
+def slice_by_name(model: Path, job_file: Path | None, out_dir: Path, cell: str,
+                  cell_file: Path | None = None) -> dict[str, Any]:
     """``slice_job``, except for a model named ``exits*`` (a library calling ``sys.exit``, as
     meshio does on a garbage .vtu) or ``kills*`` (an error that kills the worker thread)."""
     import sys
@@ -111,4 +112,4 @@ def slice_by_name(model: Path, job_file: Path | None, out_dir: Path) -> dict[str
         sys.exit(1)
     if Path(model).name.startswith("kills"):
         raise WorkerKilled("the worker thread dies")
-    return slice_job(model, job_file, out_dir)
+    return slice_job(model, job_file, out_dir, cell, cell_file)
