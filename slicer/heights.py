@@ -4,8 +4,8 @@ The report's ``slicing.height_mm`` is the distribution of H over the layer surfa
 face weighted by its area, its H the mean of its three vertices' ``vertex_height``), not over
 the tets: a tet with three vertices on a small critical region has |grad g| near zero and a
 per-tet "height" of metres, although no layer passes through it with that height. The
-initial (harmonic) field is measured the same way, on its own layers at the same target
-mean, so ``height_std_initial_mm`` and ``height_mm.std`` compare like with like.
+initial (harmonic) field is measured the same way, on its own layers (as many as the final
+field has), so ``height_std_initial_mm`` and ``height_mm.std`` compare like with like.
 ``outside_profile`` counts the layer area whose H the extrusion profile's morphology table
 does not cover (the filament there is extrapolated).
 """
@@ -16,8 +16,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from slicer.field import FieldResult, HeightStats, height_stats
-from slicer.layers import iso_surfaces, layer_spacing, match_slab_heights
+from slicer.field import FieldResult, HeightStats
+from slicer.layers import iso_surfaces, match_slab_heights
 from slicer.stages import Field, Layers
 
 
@@ -64,12 +64,17 @@ def face_heights(layers: Layers) -> FaceHeights:
     return FaceHeights(height=height, area=area, layer=np.asarray(layers.face_layer))
 
 
-def initial_layers(result: FieldResult, layer_height_mm: float) -> Layers:
-    """The layers the initial (harmonic) field g0 would give at the same target mean height,
-    extracted and slab-matched like the final field's (no critical anchors: a baseline)."""
-    dist = height_stats(result.operators, result.g0, layer_height_mm)
-    spacing = layer_spacing(result.g0, dist.delta, layer_height_mm)
-    field = Field(g=result.g0, iso=spacing.iso)
+def initial_layers(result: FieldResult, layer_count: int) -> Layers:
+    """The layers the initial (harmonic) field g0 gives in as many equal slabs of its range as
+    the final field has layers, extracted and slab-matched like the final field's (no critical
+    anchors: a baseline). The same count, not g0's own spacing for the target height: where
+    g0 is nearly flat (a thin plate with one critical face) that spacing asks for millions of
+    layers."""
+    g0 = np.asarray(result.g0, dtype=np.float64)
+    count = max(int(layer_count), 1)
+    lo, hi = float(g0.min()), float(g0.max())
+    bounds = np.linspace(lo, hi, count + 1)
+    field = Field(g=g0, iso=0.5 * (bounds[1:] + bounds[:-1]))
     layers, _, _ = match_slab_heights(iso_surfaces(result.operators, field), result.operators,
                                       field)
     return layers

@@ -148,7 +148,8 @@ def _slice(
     # Heights as printed: on the layers of the final field and, for the baseline, on the
     # layers the initial (harmonic) field would give at the same target (slicer.heights).
     final = heights.face_heights(extraction.layers)
-    initial = heights.face_heights(heights.initial_layers(result, job.slicing.layer_height_mm))
+    initial = heights.face_heights(heights.initial_layers(result,
+                                                          extraction.layers.layer_count))
     lo, hi = load_profile(job.extrusion.profile).layer_height_range
     fig_dir = out_dir / "figures"
     fig_dir.mkdir(exist_ok=True)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -9,6 +11,7 @@ from slicer.config import SlicingConfig
 from slicer.field import compute_field, height_stats
 from slicer.heights import FaceHeights, face_heights, initial_layers, outside_profile
 from slicer.layers import extract_layers
+from slicer.operators import build_operators
 from slicer.stages import Layers
 from tests.slicer.conftest import box_mesh
 
@@ -61,6 +64,20 @@ def test_the_initial_field_is_measured_on_its_own_layers() -> None:
     mesh = box_mesh((3, 3, 6), (6.0, 6.0, 12.0), jitter=0.2, seed=3)
     result = compute_field(mesh, SlicingConfig(layer_height_mm=1.0,
                                                critical=("bottom:10", "top:10")))
-    base = face_heights(initial_layers(result, 1.0))
+    base = face_heights(initial_layers(result, 12))
     assert base.layer.max() + 1 == 12  # 12 mm at 1 mm
     assert base.stats().mean == pytest.approx(1.0, rel=0.05)
+
+
+def test_a_nearly_flat_initial_field_gets_as_many_layers_as_the_final_one() -> None:
+    # A g0 flat over most of the part and steep in a corner (a thin plate with two critical
+    # faces, issue 21's octagonal pocket): g0's own spacing for a 0.6 mm mean height asked for
+    # 7 million layers and ran out of 21 GB; the baseline takes the final layer count.
+    mesh = box_mesh((6, 6, 2), (40.0, 30.0, 2.0), jitter=0.1, seed=5)
+    ops = build_operators(mesh)
+    g0 = (mesh.vertices[:, 0] / 40.0) ** 12 * 1e-3
+    assert (g0.max() - g0.min()) / height_stats(ops, g0, 0.6).delta > 1e5
+    result = SimpleNamespace(g0=g0, operators=ops)
+    layers = initial_layers(result, 3)  # type: ignore[arg-type]
+    assert layers.layer_count == 3
+    assert np.isfinite(face_heights(layers).stats().mean)
