@@ -33,6 +33,7 @@ from planner.entry import (
 )
 from planner.orientation import (
     ALPHA,
+    ALPHA_MIN_STEP_MM,
     COLLISION,
     OK,
     REASONS,
@@ -51,6 +52,8 @@ from planner.placement import (
     model_transform,
     waypoint_tangents,
 )
+from planner.refusal import cause_of
+from planner.status import CAUSES, MESSAGES, Cause, PlanStatus
 from planner.timing import (  # noqa: F401  (path_parameter: re-exported)
     ROTATION_MM_PER_RAD,
     Timing,
@@ -61,6 +64,7 @@ from planner.timing import (  # noqa: F401  (path_parameter: re-exported)
 )
 from planner.trajectory import Trajectory
 from planner.upright import COMFORT, Upright, turn_towards, upright
+from planner.verify import verify
 from slicer.errors import InputError
 from slicer.progress import Progress, StageTimer
 from slicer.stages import Toolpath
@@ -103,8 +107,9 @@ class PlanResult:
         report: the "plan" section of report.json.
         samples, orientation, timing, placement: intermediate values (for plots and tests).
         clearance: (M,) float64, mm, clearance along the trajectory (nan where not sampled).
-        status: "ok", or "unreachable waypoints", "N samples between waypoints unreachable,
-            first after waypoint W: REASON", the entry's or exit's or the time law's status.
+        status: ``PlanStatus.OK`` or the first limit not kept (only OK may be executed).
+        message: one line: what holds, or which waypoint/sample breaks what and why.
+        cause: why the first refused waypoint is refused, in the user's terms (None if none).
     """
 
     trajectory: Trajectory
@@ -114,11 +119,9 @@ class PlanResult:
     timing: Timing
     placement: Placement
     clearance: np.ndarray
-    status: str
-
-
-ALPHA_MIN_STEP_MM = 0.1  # a depositing step shorter than this lays a dot, not a filament:
-# its direction (noise of the map-back at that length) does not constrain alpha
+    status: PlanStatus
+    message: str
+    cause: Cause | None = None
 
 
 def resample(toolpath: Toolpath, model_T: np.ndarray, cell: CellConfig) -> Samples:
@@ -420,24 +423,56 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
     # entry and exit samples are reported under "entry"/"exit", not as between-waypoint ones
     between = np.flatnonzero((orient.status != OK) & (samples.waypoint < 0) & (part == 1))
     un["between_waypoints"] = int(between.size)
-    status = "ok"
+    status, message = PlanStatus.OK, MESSAGES[PlanStatus.OK]
+    cause: Cause | None = None
     if un["count"]:
-        status = "unreachable waypoints"
+        status = PlanStatus.UNREACHABLE
+        message, cause = _unreachable_message(toolpath, reach, samples, orient, part)
     elif between.size:
-        status = _between_status(reach, samples, orient, between)
-    for name, move in (("entry", entry), ("exit", leave)):
-        if not move.ok and status == "ok":
-            status = (f"unreachable {name}: {move.reason}; move the part away from the walls "
-                      "(placement) or change the home pose")
-    if split["worst_swing_mm"] > SWING_TOL_MM and status == "ok":
-        status = (f"the nozzle would leave the path by {split['worst_swing_mm']:.2f} mm between "
-                  "two samples (a pose next to a singularity); move the part (placement) or "
-                  "the robot base")
-    if timing.status != "ok":
-        status = timing.status
-    report["status"] = status
+        status = PlanStatus.UNREACHABLE_BETWEEN
+        message = _between_status(reach, samples, orient, between)
+    for move, blocked in ((entry, PlanStatus.ENTRY_BLOCKED), (leave, PlanStatus.EXIT_BLOCKED)):
+        if not move.ok and status == PlanStatus.OK:
+            status = blocked
+            message = (f"{blocked}: {move.reason}; move the part away from the walls "
+                       "(placement) or change the home pose")
+    if split["worst_swing_mm"] > SWING_TOL_MM and status == PlanStatus.OK:
+        status = PlanStatus.SWING
+        message = (f"the nozzle would leave the path by {split['worst_swing_mm']:.2f} mm between "
+                   "two samples (a pose next to a singularity); move the part (placement) or "
+                   "the robot base")
+    if timing.status != "ok" and status == PlanStatus.OK:
+        status, message = PlanStatus.TIME_LAW, timing.status
+    with timer.stage("verify" + tag):
+        # whatever the stages decided: the executed trajectory against every limit
+        checked = verify(traj, samples.speed, reach)
+    report["verified"] = checked.as_report()
+    if checked.breaches and status == PlanStatus.OK:
+        b = checked.breaches[0]
+        status = b.status
+        layer = (f" (layer {int(toolpath.layer[b.waypoint])})" if b.waypoint >= 0 else "")
+        message = (f"{MESSAGES[b.status]}: {b.count} samples, the first after waypoint "
+                   f"{b.waypoint}{layer}, worst {b.detail}")
+    report["status"] = str(status)
+    report["message"] = message
+    report["cause"] = None if cause is None else str(cause)
     return PlanResult(traj, report, samples, orient, timing, placement, orient.clearance,
-                      status)
+                      status, message, cause)
+
+
+def _unreachable_message(toolpath: Toolpath, reach: Reach, samples: Samples,
+                         orient: Orientation, part: np.ndarray) -> tuple[str, Cause]:
+    """The first unreachable waypoint, its layer, position and cause (``refusal.cause_of``)."""
+    rows = np.flatnonzero((orient.status != OK) & (samples.waypoint >= 0) & (part == 1))
+    i = int(rows[0])
+    w = int(samples.waypoint[i])
+    code = int(orient.status[i])
+    pair = reach.collision.names[int(orient.pair[i])] if orient.pair[i] >= 0 else ""
+    cause = cause_of(code, pair, samples.normal[i])
+    x, y, z = (float(c) for c in toolpath.position[w])
+    return (f"{len(rows)} waypoints unreachable, the first waypoint {w} (layer "
+            f"{int(toolpath.layer[w])}, at {x:.1f}, {y:.1f}, {z:.1f} mm): {CAUSES[cause]}"
+            + (f" ({pair})" if pair and code == COLLISION else "")), cause
 
 
 def _upright_report(up: Upright, orient: Orientation, main: np.ndarray) -> dict[str, Any]:
