@@ -422,8 +422,9 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
         pair = reach.collision.names[reason - 100] if reason >= 100 else ""
         cause = cause_of(COLLISION if reason >= 100 else reason, pair, toolpath.normal[wp])
         yaw_list = sorted({k[2] for k in cache})
-        tried = (f"tried {evaluated} placements (yaw {min(yaw_list):.0f} to {max(yaw_list):.0f} deg, "
-                 f"x and y over the tank floor)" if pc.search else "placement search is off")
+        tried = (f"tried {evaluated} placements (yaw {min(yaw_list):.0f} to "
+                 f"{max(yaw_list):.0f} deg, x and y over the tank floor)" if pc.search
+                 else "placement search is off")
         raise Refused(
             f"no reachable placement ({tried}): at the best one (offset {best[0]:.0f}, "
             f"{best[1]:.0f} mm, yaw {best[2]:.0f} deg) {u} of {len(idx)} checked waypoints are "

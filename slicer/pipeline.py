@@ -35,8 +35,12 @@ def slice_model(
     job: JobConfig,
     progress: Progress | None = None,
     until: Until = "toolpath",
+    repair: bool = False,
 ) -> dict[str, Any]:
-    """Slice ``model`` into ``out_dir``; returns the report written to ``report.json``."""
+    """Slice ``model`` into ``out_dir``; returns the report written to ``report.json``.
+
+    ``repair``: close every hole of an open surface first (``slicer.repair``).
+    """
     from slicer import mesh_io, tetrahedralize
 
     model = Path(model)
@@ -51,6 +55,11 @@ def slice_model(
         if model.suffix.lower() in mesh_io.TET_SUFFIXES:
             given: TetMesh | None = mesh_io.load_tet_mesh(model, units=job.model)
             surface = _boundary_surface(given, model)  # type: ignore[arg-type]
+        elif repair:
+            from slicer.repair import load_repaired
+
+            given = None
+            surface = load_repaired(model, units=job.model)
         else:
             given = None
             surface = mesh_io.load_surface(model, units=job.model)

@@ -48,6 +48,9 @@ def register(sub: Any) -> None:
         "replaces the job file's list)",
     )
     p.add_argument("--planar", action="store_true", help="planar slicing (g = z)")
+    p.add_argument("--repair", action="store_true",
+                   help="close every hole of an open surface (a scan) before slicing, and say "
+                   "what changed")
     p.add_argument(
         "--no-baselines",
         action="store_true",
@@ -95,7 +98,18 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--out {args.out} is a file", "name a directory")
     progress = ConsoleProgress(quiet=args.quiet)
     progress.info(f"slicing {args.model} -> {args.out}")
-    report = slice_model(args.model, args.out, job, progress=progress, until=args.until)
+    try:
+        report = slice_model(args.model, args.out, job, progress=progress, until=args.until,
+                             repair=args.repair)
+    except InputError as exc:
+        if args.repair or exc.problem.find("not watertight") < 0:
+            raise
+        from slicer.repair import repair_offer
+
+        raise repair_offer(args.model, job.model, exc) from exc
+    for note in report.get("model", {}).get("repairs", []):
+        if note.startswith("--repair"):
+            print(f"note: {note}", flush=True)
     summary = {
         "layers": report.get("slicing", {}).get("layers"),
         "waypoints": report.get("toolpath", {}).get("waypoints"),
