@@ -72,7 +72,10 @@ def slice_model(
 
     with timer.stage("tetrahedralize"):
         if given is None:
-            tetmesh, stats = tetrahedralize.tetrahedralize(surface, job.mesh, progress)
+            from slicer.tet_cache import cache_dir
+
+            tetmesh, stats = tetrahedralize.tetrahedralize(surface, job.mesh, progress,
+                                                           cache=cache_dir())
         else:
             tetmesh = given
             stats = tetrahedralize.quality(tetmesh.vertices, tetmesh.tets, surface.volume_mm3)

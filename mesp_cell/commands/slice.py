@@ -107,9 +107,6 @@ def run(args: argparse.Namespace) -> int:
         from slicer.repair import repair_offer
 
         raise repair_offer(args.model, job.model, exc) from exc
-    for note in report.get("model", {}).get("repairs", []):
-        if note.startswith("--repair"):
-            print(f"note: {note}", flush=True)
     summary = {
         "layers": report.get("slicing", {}).get("layers"),
         "waypoints": report.get("toolpath", {}).get("waypoints"),

@@ -74,5 +74,5 @@ def test_slice_offers_and_applies_repair(tmp_path: Path,
     assert len(err) == 1 and "re-run with --repair (checked" in err[0]
     assert main([*args, "--repair"]) == 0
     printed = capsys.readouterr().out
-    assert "note: --repair: filled 1 hole (4 open edges" in printed
+    assert "note: model: --repair: filled 1 hole (4 open edges" in printed
     assert (out / "tetmesh.npz").is_file()
