@@ -50,6 +50,9 @@ class Placement:
         alternatives: other placements the search found reaching every sampled waypoint, the
             yaws far apart first (see ``_alternatives``): (x, y, yaw_deg, clearance_mm).
             The planner tries them where the entry or exit is blocked at this one.
+        checked: waypoints each placement was scored on (the last, larger sample).
+        need_tilt: waypoints whose printing direction does not keep alpha on both steps
+            (all of them up to ``TILT_SAMPLES`` are among the checked).
     """
 
     model_T: np.ndarray
@@ -61,6 +64,8 @@ class Placement:
     worst_reason: int
     worst_waypoint: int
     alternatives: tuple[tuple[float, float, float, float], ...] = ()
+    checked: int = 0
+    need_tilt: int = 0
 
 
 def bbox(toolpath: Toolpath) -> tuple[np.ndarray, np.ndarray]:
@@ -322,6 +327,7 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
     # it needs a tilt, which the walls or the reach may forbid at one placement only
     tilted = np.flatnonzero(~alpha_within(cell, -toolpath.normal, steps.leave, steps.extrude,
                                           steps.arrive))
+    need_tilt = len(tilted)
     if len(tilted) > TILT_SAMPLES:
         tilted = tilted[np.linspace(0, len(tilted) - 1, TILT_SAMPLES).round().astype(int)]
     # where reach and walls bite first: the extreme waypoints in eight horizontal directions
@@ -433,7 +439,7 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
             FIXES[cause], cause, wp)
     model_T = model_transform(cell, box, np.array(offset), best[2])
     return Placement(model_T, offset, float(best[2] % 360.0), u, c, evaluated, reason, wp,
-                     _alternatives(cache, best))
+                     _alternatives(cache, best), len(idx), need_tilt)
 
 
 YAW_APART_DEG = 60.0  # alternatives whose yaws differ this much from each other come first

@@ -687,6 +687,8 @@ def _report(
         "duration_s": traj.duration_s,
         "placement": {"offset_mm": list(placement.offset_mm), "yaw_deg": placement.yaw_deg,
                       "evaluated": placement.evaluated,
+                      "checked_waypoints": placement.checked,
+                      "waypoints_needing_tilt": placement.need_tilt,
                       "search_clearance_mm": placement.clearance_mm},
         "min_clearance_mm": float(clear[k]) if k >= 0 else None,
         "min_clearance_pair": names[orient.pair[k]] if k >= 0 and orient.pair[k] >= 0 else None,
@@ -712,7 +714,11 @@ def _report(
         if len(acc) else [0.0] * 6,
         "speed_ratio": {**_stats(ratio),
                         "within_5pct": float(np.mean(np.abs(ratio - 1) <= 0.05))
-                        if len(ratio) else 1.0},
+                        if len(ratio) else 1.0,
+                        # the same by extruded length (short steps at a turn weigh less)
+                        "within_5pct_length": float(
+                            np.sum(step[ex_step] * (np.abs(ratio - 1) <= 0.05))
+                            / max(float(step[ex_step].sum()), 1e-12)) if len(ratio) else 1.0},
         "over_deposition": {
             "volume_mm3": float(extra.sum()),
             "fraction": float(extra.sum() / max(C * planned.sum(), 1e-12)),

@@ -45,9 +45,8 @@ def test_steps_are_the_arriving_and_leaving_ones(cell: CellConfig) -> None:
 def test_a_downward_printing_direction_is_refused_as_such(cell: CellConfig) -> None:
     # a ring whose printing direction points down (an underside with a top critical region
     # forced onto it): no placement and no cell prints it from below
-    tp = synthetic.rings(20.0, [5.0], [0.0])
-    tp = tp.__class__(**{**{f: getattr(tp, f) for f in tp.__dataclass_fields__},
-                         "normal": -tp.normal})
+    ring = synthetic.rings(20.0, [5.0], [0.0])
+    tp = synthetic.make_toolpath(ring.position, -ring.normal, ring.path)
     with pytest.raises(Refused) as err:
         choose_placement(Reach(cell), tp)
     assert err.value.cause == Cause.DOWNWARD
