@@ -27,7 +27,7 @@ from planner.orientation import (
     orientation_levels,
     tool_rotation,
 )
-from planner.refusal import Steps, bends, cause_of, downward, waypoint_steps
+from planner.refusal import Bends, Steps, bends, cause_of, downward, waypoint_steps
 from planner.status import CAUSES, FIXES, Cause, Refused
 from slicer.errors import InputError
 from slicer.stages import Toolpath
@@ -272,17 +272,13 @@ def _where(toolpath: Toolpath, i: int) -> str:
     return f"waypoint {i} (layer {int(toolpath.layer[i])}, at {x:.1f}, {y:.1f}, {z:.1f} mm)"
 
 
-def refuse_bends(toolpath: Toolpath, cell: CellConfig, steps: Steps) -> None:
-    """Refuse a job with waypoints no nozzle axis serves (``refusal.bends``), naming the
+def bend_refusal(toolpath: Toolpath, cell: CellConfig, found: Bends, also: str = "",
+                 also_fix: str = "") -> Refused:
+    """The refusal of a job with waypoints no nozzle axis serves (``refusal.bends``): the
     first, its layer, the turn of its path, and the alpha range that would serve them all
     (checked by the same test); no placement or cell with this alpha range can help.
-
-    Raises:
-        Refused: with cause BEND (or DOWNWARD where the first such waypoint faces down).
-    """
-    found = bends(toolpath, cell, steps)
-    if not len(found.waypoint):
-        return
+    ``also``: what else the placement search found (appended to the problem), ``also_fix``
+    its fix (appended to the fix)."""
     i = int(found.waypoint[0])
     half = float(np.ceil(found.needed_deg.max()))
     pl = cell.planning
@@ -294,11 +290,11 @@ def refuse_bends(toolpath: Toolpath, cell: CellConfig, steps: Steps) -> None:
     if half < 90.0:
         wider = (f", or a cell whose [planning] alpha range is at least [{90 - half:.0f}, "
                  f"{90 + half:.0f}] deg (checked: it serves all {len(found.waypoint)})")
-    raise Refused(
+    return Refused(
         f"{len(found.waypoint)} waypoints cannot be printed in any placement, the first "
         f"{_where(toolpath, i)}: {CAUSES[cause]} (alpha range [{pl.alpha_min_deg:g}, "
-        f"{pl.alpha_max_deg:g}] deg{turn})",
-        FIXES[cause] + wider, cause, i)
+        f"{pl.alpha_max_deg:g}] deg{turn}){also}",
+        FIXES[cause] + wider + (f"; for the rest, {also_fix}" if also_fix else ""), cause, i)
 
 
 def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Placement:
@@ -320,7 +316,13 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
             "raise [tank] gel_fill_mm or lower [placement] offset_mm[2] in the cell TOML",
         )
     steps = waypoint_steps(toolpath, cell)
-    refuse_bends(toolpath, cell, steps)
+    # waypoints no axis serves are refused whatever the placement; the search goes on without
+    # them, so the refusal also says what else stands in the way
+    found = bends(toolpath, cell, steps)
+    if len(found.waypoint):
+        served = steps.extrude.copy()
+        served[found.waypoint] = False
+        steps = steps._replace(extrude=served)
     N = len(toolpath)
     idx = np.unique(np.linspace(0, N - 1, min(N, samples)).round().astype(int))
     # every waypoint the printing direction alone does not serve (a bend against the layer):
@@ -431,12 +433,19 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
         tried = (f"tried {evaluated} placements (yaw {min(yaw_list):.0f} to "
                  f"{max(yaw_list):.0f} deg, x and y over the tank floor)" if pc.search
                  else "placement search is off")
-        raise Refused(
-            f"no reachable placement ({tried}): at the best one (offset {best[0]:.0f}, "
-            f"{best[1]:.0f} mm, yaw {best[2]:.0f} deg) {u} of {len(idx)} checked waypoints are "
-            f"unreachable, the first {_where(toolpath, wp)}: {CAUSES[cause]}"
-            + (f" ({pair})" if pair else ""),
-            FIXES[cause], cause, wp)
+        unreached = (f"at the best one (offset {best[0]:.0f}, {best[1]:.0f} mm, yaw "
+                     f"{best[2]:.0f} deg) {u} of {len(idx)} checked waypoints are unreachable, "
+                     f"the first {_where(toolpath, wp)}: {CAUSES[cause]}"
+                     + (f" ({pair})" if pair else ""))
+        if len(found.waypoint):
+            raise bend_refusal(toolpath, cell, found, f"; besides, no placement reaches the "
+                                                      f"rest ({tried}): {unreached}",
+                               FIXES[cause])
+        raise Refused(f"no reachable placement ({tried}): {unreached}", FIXES[cause], cause,
+                      wp)
+    if len(found.waypoint):
+        raise bend_refusal(toolpath, cell, found, f" (the rest is reachable: {evaluated} "
+                                                  "placements tried)")
     model_T = model_transform(cell, box, np.array(offset), best[2])
     return Placement(model_T, offset, float(best[2] % 360.0), u, c, evaluated, reason, wp,
                      _alternatives(cache, best), len(idx), need_tilt)

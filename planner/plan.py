@@ -5,10 +5,12 @@ the tank), resample (insert samples on long segments), upright (turn printing di
 towards vertical where the wrist would near the base axis), orientation (spin and alpha per
 sample), continuity (insert samples where a step in joint space would swing the tip off the
 path), entry (into and out of the gel along the nozzle axis), velocity (DLS joint rates),
-timing (time law within joint limits), report. Where the entry or exit is blocked at the
-searched placement, the stages after it run again at the search's next placements (another
-yaw first: where the job starts and ends decides). ``plan`` returns the ``Trajectory`` stage
-and the report section.
+timing (time law within joint limits), report, verify (the executed trajectory against every
+limit: ``planner.verify``; the status is ok only if all hold). Where the plan is not ok at the
+searched placement (a blocked entry or exit, a waypoint the search's sample missed, a broken
+limit), the stages after it run again at the search's next placements (another yaw first:
+where the job starts and ends decides). ``plan`` returns the ``Trajectory`` stage, the report
+section and the status with its one-line message (``planner.status``).
 """
 
 from __future__ import annotations
@@ -332,7 +334,8 @@ def plan(
     if searched and _refused(result):
         # the entry or exit depends on where the job starts and ends, and the placement score
         # checks only a sample of the waypoints (a lone one at a steep edge can be out of
-        # reach): re-plan at the search's other reaching placements
+        # reach, a sample between them near a wall): re-plan at the search's other reaching
+        # placements
         box = bbox(toolpath)
         tries = 0
         for x, y, yaw, clear in placement.alternatives[:REPLANS]:
@@ -350,11 +353,9 @@ def plan(
 
 
 def _refused(result: PlanResult) -> bool:
-    """The entry into or the exit out of the gel cannot be executed, or some waypoint is
-    unreachable."""
-    return bool(result.report["entry"]["status"] != "ok"
-                or result.report["exit"]["status"] != "ok"
-                or result.report["unreachable"]["count"] > 0)
+    """The plan is not executable at its placement (any status but ok: an unreachable
+    waypoint, a blocked entry or exit, a limit the verification found broken)."""
+    return result.status != PlanStatus.OK
 
 
 def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: StageTimer,
