@@ -30,6 +30,8 @@ from slicer.operators import BoundaryFaces, TetOperators
 SMALL_PART_MM = 10.0
 TOP_POINTS = 48  # surface points near the top whose reach is checked (plus the box corners)
 YAW_STEP_DEG = 15.0  # footprint rotations tried for the fit
+MAX_PATCH_FACES = 100_000  # faces of the subdivided surface the regions are selected on
+EQUILATERAL = np.sqrt(3.0) / 4.0  # area of an equilateral triangle of unit edge
 
 
 @dataclass(frozen=True)
@@ -91,10 +93,15 @@ def fine_surface(surface: Surface, edge_mm: float) -> Surface:
     """The surface with every edge split down to ``edge_mm`` (shape unchanged): the tet
     mesh's boundary has faces of about that size, and a region needs a few faces
     (``critical.MIN_REGION_FACES``) to count, so CAD exports with large triangles are
-    selected on faces like the slicer's."""
+    selected on faces like the slicer's. At most about ``MAX_PATCH_FACES`` faces (a longer
+    edge on a large surface: the answer stays within seconds)."""
     import trimesh
 
-    v, f = trimesh.remesh.subdivide_to_size(surface.vertices, surface.faces, max_edge=edge_mm,
+    tri = surface.vertices[surface.faces]
+    area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
+                                      axis=1).sum())
+    edge = max(edge_mm, float(np.sqrt(area / (EQUILATERAL * MAX_PATCH_FACES))))
+    v, f = trimesh.remesh.subdivide_to_size(surface.vertices, surface.faces, max_edge=edge,
                                             max_iter=20)
     return replace(surface, vertices=v, faces=f)
 

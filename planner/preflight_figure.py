@@ -19,7 +19,7 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 from slicer.mesh_io import Surface
 
 LEGEND_MAX = 8  # regions named in the legend (the command lists them all)
-MAX_FACES = 40_000  # faces drawn at most (every k-th beyond; regions always drawn in full)
+MAX_FACES = 30_000  # faces drawn at most, of the regions and of the rest (every k-th beyond)
 
 
 def critical_patches_png(surface: Surface, face_region: np.ndarray, labels: list[str],
@@ -28,10 +28,12 @@ def critical_patches_png(surface: Surface, face_region: np.ndarray, labels: list
     a legend of ``labels`` (one per region); write the PNG at ``path``."""
     v, f = surface.vertices, surface.faces
     keep = face_region >= 0
-    rest = np.flatnonzero(~keep)
+    rest, chosen = np.flatnonzero(~keep), np.flatnonzero(keep)
     if len(rest) > MAX_FACES:
         rest = rest[:: int(np.ceil(len(rest) / MAX_FACES))]
-    shown = np.concatenate([rest, np.flatnonzero(keep)])
+    if len(chosen) > MAX_FACES:
+        chosen = chosen[:: int(np.ceil(len(chosen) / MAX_FACES))]
+    shown = np.concatenate([rest, chosen])
     cmap = plt.get_cmap("tab10")
     colour = np.where(face_region[shown, None] >= 0,
                       np.array([cmap(int(k) % 10) for k in np.maximum(face_region[shown], 0)]),
