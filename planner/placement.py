@@ -292,9 +292,10 @@ def bend_refusal(toolpath: Toolpath, cell: CellConfig, found: Bends, also: str =
                  f"{90 + half:.0f}] deg (checked: it serves all {len(found.waypoint)})")
     return Refused(
         f"{len(found.waypoint)} waypoints cannot be printed in any placement, the first "
-        f"{_where(toolpath, i)}: {CAUSES[cause]} (alpha range [{pl.alpha_min_deg:g}, "
-        f"{pl.alpha_max_deg:g}] deg{turn}){also}",
-        FIXES[cause] + wider + (f"; for the rest, {also_fix}" if also_fix else ""), cause, i)
+        f"{_where(toolpath, i)}: {CAUSES[cause]} (with any tilt and lean the planner allows; "
+        f"alpha range [{pl.alpha_min_deg:g}, {pl.alpha_max_deg:g}] deg{turn}){also}",
+        FIXES[cause] + wider + (f"; for the rest, {also_fix}"
+                                if also_fix and also_fix != FIXES[cause] else ""), cause, i)
 
 
 def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Placement:

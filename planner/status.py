@@ -63,9 +63,8 @@ class Cause(StrEnum):
 
 
 CAUSES: dict[Cause, str] = {
-    Cause.BEND: "the path bends against its layer so sharply that no nozzle axis within the "
-                "allowed deviation from the printing direction keeps alpha in range on both "
-                "the arriving and the leaving step",
+    Cause.BEND: "the path bends against its layer so sharply that no nozzle axis the cell "
+                "can take there keeps alpha in range on both the arriving and the leaving step",
     Cause.DOWNWARD: "the printing direction points downward: the nozzle would have to come "
                     "from below the part",
     Cause.REACH: "the arm cannot take the pose (out of reach, a joint limit or a singularity)",
