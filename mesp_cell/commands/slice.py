@@ -102,7 +102,7 @@ def run(args: argparse.Namespace) -> int:
         report = slice_model(args.model, args.out, job, progress=progress, until=args.until,
                              repair=args.repair)
     except InputError as exc:
-        if args.repair or exc.problem.find("not watertight") < 0:
+        if args.repair or "not watertight" not in exc.problem:
             raise
         from slicer.repair import repair_offer
 
