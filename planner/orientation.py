@@ -35,6 +35,10 @@ REASONS = {
 }
 
 
+ALPHA_MIN_STEP_MM = 0.1  # a depositing step shorter than this lays a dot, not a filament:
+# its direction (noise of the map-back at that length) does not constrain alpha
+
+
 def unit(v: np.ndarray) -> np.ndarray:
     """Rows of ``v`` (..., 3) normalised (zero rows stay zero)."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)

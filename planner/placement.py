@@ -20,14 +20,15 @@ from planner.orientation import (
     ALPHA,
     COLLISION,
     OK,
-    REASONS,
     Reach,
-    alpha_allowed,
     alpha_of,
+    alpha_within,
     nozzle_axis,
     orientation_levels,
     tool_rotation,
 )
+from planner.refusal import Bends, Steps, bends, cause_of, downward, waypoint_steps
+from planner.status import CAUSES, FIXES, Cause, Refused
 from slicer.errors import InputError
 from slicer.stages import Toolpath
 
@@ -49,6 +50,9 @@ class Placement:
         alternatives: other placements the search found reaching every sampled waypoint, the
             yaws far apart first (see ``_alternatives``): (x, y, yaw_deg, clearance_mm).
             The planner tries them where the entry or exit is blocked at this one.
+        checked: waypoints each placement was scored on (the last, larger sample).
+        need_tilt: waypoints whose printing direction does not keep alpha on both steps
+            (all of them up to ``TILT_SAMPLES`` are among the checked).
     """
 
     model_T: np.ndarray
@@ -60,6 +64,8 @@ class Placement:
     worst_reason: int
     worst_waypoint: int
     alternatives: tuple[tuple[float, float, float, float], ...] = ()
+    checked: int = 0
+    need_tilt: int = 0
 
 
 def bbox(toolpath: Toolpath) -> tuple[np.ndarray, np.ndarray]:
@@ -157,13 +163,17 @@ class LevelReach(NamedTuple):
 
 def reach_levels(reach: Reach, p: np.ndarray, n: np.ndarray, t: np.ndarray,
                  extrude: np.ndarray, spins: int = 8, tilt_step_deg: float = 10.0,
-                 lean_step_deg: float = 20.0) -> LevelReach:
+                 lean_step_deg: float = 20.0, arrive: np.ndarray | None = None) -> LevelReach:
     """The first orientation level (and its best-spin clearance) reaching each waypoint.
 
     Args:
         p: (S, 3) float64, mm, nozzle tips in the base frame. n, t: (S, 3) float64, unit
-            normals and motion directions in the base frame. extrude: (S,) bool.
+            normals and motion directions (the leaving step) in the base frame.
+            extrude: (S,) bool.
         spins: rotations about the nozzle axis tried per level.
+        arrive: (S, 3) float64, unit direction of the depositing step arriving at each
+            waypoint (zero rows where none): alpha is checked against both steps, as the
+            orientation stage does. None: only ``t``.
     """
     S = len(p)
     grid = np.linspace(-np.pi, np.pi, spins, endpoint=False)
@@ -190,8 +200,9 @@ def reach_levels(reach: Reach, p: np.ndarray, n: np.ndarray, t: np.ndarray,
         q = reach.solve(np.repeat(p[rr], spins, axis=0), R, reach.home)
         ev = reach.check(q, iters=8)
         st = ev.status.reshape(len(rr), spins)
-        st = np.where(alpha_allowed(reach.cell, alpha_of(ax, t[rr]), extrude[rr])[:, None],
-                      st, np.int8(ALPHA))
+        ok_alpha = alpha_within(reach.cell, ax, t[rr], extrude[rr],
+                                None if arrive is None else arrive[rr])
+        st = np.where(ok_alpha[:, None], st, np.int8(ALPHA))
         ok = st == OK
         clear = np.where(ok, np.nan_to_num(ev.clearance, nan=-1e9).reshape(len(rr), spins),
                          -np.inf)
@@ -211,20 +222,26 @@ def reach_levels(reach: Reach, p: np.ndarray, n: np.ndarray, t: np.ndarray,
 
 def score(reach: Reach, toolpath: Toolpath, model_T: np.ndarray, idx: np.ndarray,
           spins: int = 8, tilt_step_deg: float = 10.0,
-          lean_step_deg: float = 20.0) -> tuple[int, float, int, int]:
+          lean_step_deg: float = 20.0, steps: Steps | None = None
+          ) -> tuple[int, float, int, int]:
     """(unreachable count, clearance score mm, first reason, first waypoint) of a placement.
 
     The clearance score is the smallest best-spin clearance over the sampled waypoints plus a
     tenth of the mean of their lowest quarter (each capped at 100 mm), so ties of the minimum
     (e.g. nozzle to floor, the same everywhere) are broken by the tight spots of the rest of
-    the job; each waypoint that needs a tilt or a lean costs 2 mm.
+    the job; each waypoint that needs a tilt or a lean costs 2 mm. ``steps``: the depositing
+    steps of every waypoint (``refusal.waypoint_steps``), alpha checked against both; None:
+    the path's tangent only.
     """
     R_m = model_T[:3, :3]
     p = toolpath.position[idx] @ R_m.T + model_T[:3, 3]
     n = toolpath.normal[idx] @ R_m.T
-    t = _tangents(toolpath, idx) @ R_m.T
-    lv = reach_levels(reach, p, n, t, toolpath.extrude[idx], spins, tilt_step_deg,
-                      lean_step_deg)
+    if steps is None:
+        t, arrive, extrude = _tangents(toolpath, idx) @ R_m.T, None, toolpath.extrude[idx]
+    else:
+        t, arrive = steps.leave[idx] @ R_m.T, steps.arrive[idx] @ R_m.T
+        extrude = steps.extrude[idx]
+    lv = reach_levels(reach, p, n, t, extrude, spins, tilt_step_deg, lean_step_deg, arrive)
     best, first_status, first_pair = lv.best, lv.first_status, lv.first_pair
     reach_ok = lv.level >= 0
     tilted = int((lv.level > 0).sum())
@@ -246,35 +263,39 @@ def score(reach: Reach, toolpath: Toolpath, model_T: np.ndarray, idx: np.ndarray
     return unreachable, value, first_reason, first_wp
 
 
-def _reason_text(reach: Reach, code: int) -> str:
-    if code >= 100:
-        return f"collision of {reach.collision.names[code - 100]}"
-    return REASONS.get(code, "unknown")
+TILT_SAMPLES = 256  # at most this many waypoints that need a tilt join the search's sample
 
 
-# what to do where no nozzle angle follows the path (ALPHA), here and in `mesp plan`
-BEND_FIX = ("the path bends too sharply against its layer for any nozzle angle within "
-            "[planning] alpha_min_deg..alpha_max_deg: re-slice with another --layer-height "
-            "or --edge-length")
+def _where(toolpath: Toolpath, i: int) -> str:
+    """'waypoint I (layer L, at x, y, z mm)' for messages."""
+    x, y, z = (float(c) for c in toolpath.position[i])
+    return f"waypoint {i} (layer {int(toolpath.layer[i])}, at {x:.1f}, {y:.1f}, {z:.1f} mm)"
 
 
-def _fix_text(reach: Reach, code: int) -> str:
-    """What the user can change in the cell TOML for a failure of this kind."""
-    name = reach.collision.names[code - 100] if code >= 100 else ""
-    if code == ALPHA:
-        # no placement changes the angle between the path and its own layer
-        return f"there {BEND_FIX}"
-    if "tank_wall" in name:
-        return ("use a wider tank ([tank] inner_size_mm), a longer nozzle ([tool] "
-                "nozzle_length_mm, tip_xyz_mm) or a smaller model; for a flat part the "
-                "shallow tray, --cell planner/cells/tray.toml")
-    if "gel" in name or "tank_floor" in name:
-        return ("lower the gel ([tank] gel_fill_mm), lift the model less ([placement] "
-                "offset_mm) or use a longer nozzle ([tool] nozzle_length_mm, tip_xyz_mm)")
-    if code >= 100:
-        return "move the tank or the robot base ([tank] floor_center_mm, [robot] base_xyz_mm)"
-    return ("move the tank closer to the robot or the robot base ([tank] floor_center_mm, "
-            "[robot] base_xyz_mm), or use a smaller model")
+def bend_refusal(toolpath: Toolpath, cell: CellConfig, found: Bends, also: str = "",
+                 also_fix: str = "") -> Refused:
+    """The refusal of a job with waypoints no nozzle axis serves (``refusal.bends``): the
+    first, its layer, the turn of its path, and the alpha range that would serve them all
+    (checked by the same test); no placement or cell with this alpha range can help.
+    ``also``: what else the placement search found (appended to the problem), ``also_fix``
+    its fix (appended to the fix)."""
+    i = int(found.waypoint[0])
+    half = float(np.ceil(found.needed_deg.max()))
+    pl = cell.planning
+    cause = Cause.DOWNWARD if downward(toolpath.normal[i:i + 1], np.array([0.0, 0.0, 1.0]))[0] \
+        else Cause.BEND
+    turn = (f"; its path turns {found.turn_deg[0]:.0f} deg there" if found.turn_deg[0] > 0
+            else "")
+    wider = ""
+    if half < 90.0:
+        wider = (f", or a cell whose [planning] alpha range is at least [{90 - half:.0f}, "
+                 f"{90 + half:.0f}] deg (checked: it serves all {len(found.waypoint)})")
+    return Refused(
+        f"{len(found.waypoint)} waypoints cannot be printed in any placement, the first "
+        f"{_where(toolpath, i)}: {CAUSES[cause]} (with any tilt and lean the planner allows; "
+        f"alpha range [{pl.alpha_min_deg:g}, {pl.alpha_max_deg:g}] deg{turn}){also}",
+        FIXES[cause] + wider + (f"; for the rest, {also_fix}"
+                                if also_fix and also_fix != FIXES[cause] else ""), cause, i)
 
 
 def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Placement:
@@ -295,8 +316,23 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
             f"gel surface ({cell.tank.gel_fill_mm:.1f} mm)",
             "raise [tank] gel_fill_mm or lower [placement] offset_mm[2] in the cell TOML",
         )
+    steps = waypoint_steps(toolpath, cell)
+    # waypoints no axis serves are refused whatever the placement; the search goes on without
+    # them, so the refusal also says what else stands in the way
+    found = bends(toolpath, cell, steps)
+    if len(found.waypoint):
+        served = steps.extrude.copy()
+        served[found.waypoint] = False
+        steps = steps._replace(extrude=served)
     N = len(toolpath)
     idx = np.unique(np.linspace(0, N - 1, min(N, samples)).round().astype(int))
+    # every waypoint the printing direction alone does not serve (a bend against the layer):
+    # it needs a tilt, which the walls or the reach may forbid at one placement only
+    tilted = np.flatnonzero(~alpha_within(cell, -toolpath.normal, steps.leave, steps.extrude,
+                                          steps.arrive))
+    need_tilt = len(tilted)
+    if len(tilted) > TILT_SAMPLES:
+        tilted = tilted[np.linspace(0, len(tilted) - 1, TILT_SAMPLES).round().astype(int)]
     # where reach and walls bite first: the extreme waypoints in eight horizontal directions
     # (and up and down), and the waypoints whose normals lean furthest, weighted by how far
     # out they lie in the direction they lean
@@ -312,7 +348,7 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
     ])
     lean = np.linalg.norm(toolpath.normal[:, :2], axis=1)
     steep = np.argsort(-lean)[: max(1, samples // 2)]
-    idx = np.unique(np.concatenate([idx, extremes, steep]))
+    idx = np.unique(np.concatenate([idx, extremes, steep, tilted]))
     lift = pc.offset_mm[2]
     evaluated = 0
     cache: dict[tuple[float, float, float], tuple[int, float, int, int]] = {}
@@ -323,7 +359,7 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
         if k not in cache:
             evaluated += 1
             cache[k] = score(reach, toolpath, model_transform(cell, box,
-                             np.array([x, y, lift]), yaw), idx)
+                             np.array([x, y, lift]), yaw), idx, steps=steps)
         u, c, _, _ = cache[k]
         return (u, -c)
 
@@ -377,9 +413,9 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
             finalists.add((0.0, 0.0, round(best[2] % 360.0, 6)))
         idx = np.unique(np.concatenate([
             np.linspace(0, N - 1, min(N, 4 * samples)).round().astype(int), extremes,
-            np.argsort(-lean)[: 4 * samples]]))
+            np.argsort(-lean)[: 4 * samples], tilted]))
         confirmed = {k: score(reach, toolpath, model_transform(cell, box, np.array(
-            [k[0], k[1], lift]), k[2]), idx, 12, 5.0, 10.0) for k in sorted(finalists)}
+            [k[0], k[1], lift]), k[2]), idx, 12, 5.0, 10.0, steps) for k in sorted(finalists)}
         evaluated += len(confirmed)
         k_best = min(confirmed, key=lambda k: (confirmed[k][0], -confirmed[k][1]))
         centre = (0.0, 0.0, round(best[2] % 360.0, 6))
@@ -392,15 +428,28 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
         u, c, reason, wp = confirmed[k_best]
     offset = (best[0], best[1], lift)
     if u:
-        raise InputError(
-            f"no reachable placement: at the best one (offset {best[0]:.0f}, {best[1]:.0f} mm, "
-            f"yaw {best[2]:.0f} deg) {u} of {len(idx)} sampled waypoints are unreachable, e.g. "
-            f"waypoint {wp}: {_reason_text(reach, reason)}",
-            _fix_text(reach, reason),
-        )
+        pair = reach.collision.names[reason - 100] if reason >= 100 else ""
+        cause = cause_of(COLLISION if reason >= 100 else reason, pair, toolpath.normal[wp])
+        yaw_list = sorted({k[2] for k in cache})
+        tried = (f"tried {evaluated} placements (yaw {min(yaw_list):.0f} to "
+                 f"{max(yaw_list):.0f} deg, x and y over the tank floor)" if pc.search
+                 else "placement search is off")
+        unreached = (f"at the best one (offset {best[0]:.0f}, {best[1]:.0f} mm, yaw "
+                     f"{best[2]:.0f} deg) {u} of {len(idx)} checked waypoints are unreachable, "
+                     f"the first {_where(toolpath, wp)}: {CAUSES[cause]}"
+                     + (f" ({pair})" if pair else ""))
+        if len(found.waypoint):
+            raise bend_refusal(toolpath, cell, found, f"; besides, no placement reaches the "
+                                                      f"rest ({tried}): {unreached}",
+                               FIXES[cause])
+        raise Refused(f"no reachable placement ({tried}): {unreached}", FIXES[cause], cause,
+                      wp)
+    if len(found.waypoint):
+        raise bend_refusal(toolpath, cell, found, f" (the rest is reachable: {evaluated} "
+                                                  "placements tried)")
     model_T = model_transform(cell, box, np.array(offset), best[2])
     return Placement(model_T, offset, float(best[2] % 360.0), u, c, evaluated, reason, wp,
-                     _alternatives(cache, best))
+                     _alternatives(cache, best), len(idx), need_tilt)
 
 
 YAW_APART_DEG = 60.0  # alternatives whose yaws differ this much from each other come first

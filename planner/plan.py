@@ -5,10 +5,12 @@ the tank), resample (insert samples on long segments), upright (turn printing di
 towards vertical where the wrist would near the base axis), orientation (spin and alpha per
 sample), continuity (insert samples where a step in joint space would swing the tip off the
 path), entry (into and out of the gel along the nozzle axis), velocity (DLS joint rates),
-timing (time law within joint limits), report. Where the entry or exit is blocked at the
-searched placement, the stages after it run again at the search's next placements (another
-yaw first: where the job starts and ends decides). ``plan`` returns the ``Trajectory`` stage
-and the report section.
+timing (time law within joint limits), report, verify (the executed trajectory against every
+limit: ``planner.verify``; the status is ok only if all hold). Where the plan is not ok at the
+searched placement (a blocked entry or exit, a waypoint the search's sample missed, a broken
+limit), the stages after it run again at the search's next placements (another yaw first:
+where the job starts and ends decides). ``plan`` returns the ``Trajectory`` stage, the report
+section and the status with its one-line message (``planner.status``).
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from planner.entry import (
 )
 from planner.orientation import (
     ALPHA,
+    ALPHA_MIN_STEP_MM,
     COLLISION,
     OK,
     REASONS,
@@ -51,6 +54,8 @@ from planner.placement import (
     model_transform,
     waypoint_tangents,
 )
+from planner.refusal import cause_of
+from planner.status import CAUSES, MESSAGES, Cause, PlanStatus
 from planner.timing import (  # noqa: F401  (path_parameter: re-exported)
     ROTATION_MM_PER_RAD,
     Timing,
@@ -61,6 +66,7 @@ from planner.timing import (  # noqa: F401  (path_parameter: re-exported)
 )
 from planner.trajectory import Trajectory
 from planner.upright import COMFORT, Upright, turn_towards, upright
+from planner.verify import verify
 from slicer.errors import InputError
 from slicer.progress import Progress, StageTimer
 from slicer.stages import Toolpath
@@ -103,8 +109,9 @@ class PlanResult:
         report: the "plan" section of report.json.
         samples, orientation, timing, placement: intermediate values (for plots and tests).
         clearance: (M,) float64, mm, clearance along the trajectory (nan where not sampled).
-        status: "ok", or "unreachable waypoints", "N samples between waypoints unreachable,
-            first after waypoint W: REASON", the entry's or exit's or the time law's status.
+        status: ``PlanStatus.OK`` or the first limit not kept (only OK may be executed).
+        message: one line: what holds, or which waypoint/sample breaks what and why.
+        cause: why the first refused waypoint is refused, in the user's terms (None if none).
     """
 
     trajectory: Trajectory
@@ -114,11 +121,9 @@ class PlanResult:
     timing: Timing
     placement: Placement
     clearance: np.ndarray
-    status: str
-
-
-ALPHA_MIN_STEP_MM = 0.1  # a depositing step shorter than this lays a dot, not a filament:
-# its direction (noise of the map-back at that length) does not constrain alpha
+    status: PlanStatus
+    message: str
+    cause: Cause | None = None
 
 
 def resample(toolpath: Toolpath, model_T: np.ndarray, cell: CellConfig) -> Samples:
@@ -329,7 +334,8 @@ def plan(
     if searched and _refused(result):
         # the entry or exit depends on where the job starts and ends, and the placement score
         # checks only a sample of the waypoints (a lone one at a steep edge can be out of
-        # reach): re-plan at the search's other reaching placements
+        # reach, a sample between them near a wall): re-plan at the search's other reaching
+        # placements
         box = bbox(toolpath)
         tries = 0
         for x, y, yaw, clear in placement.alternatives[:REPLANS]:
@@ -347,11 +353,9 @@ def plan(
 
 
 def _refused(result: PlanResult) -> bool:
-    """The entry into or the exit out of the gel cannot be executed, or some waypoint is
-    unreachable."""
-    return bool(result.report["entry"]["status"] != "ok"
-                or result.report["exit"]["status"] != "ok"
-                or result.report["unreachable"]["count"] > 0)
+    """The plan is not executable at its placement (any status but ok: an unreachable
+    waypoint, a blocked entry or exit, a limit the verification found broken)."""
+    return result.status != PlanStatus.OK
 
 
 def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: StageTimer,
@@ -420,24 +424,56 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
     # entry and exit samples are reported under "entry"/"exit", not as between-waypoint ones
     between = np.flatnonzero((orient.status != OK) & (samples.waypoint < 0) & (part == 1))
     un["between_waypoints"] = int(between.size)
-    status = "ok"
+    status, message = PlanStatus.OK, MESSAGES[PlanStatus.OK]
+    cause: Cause | None = None
     if un["count"]:
-        status = "unreachable waypoints"
+        status = PlanStatus.UNREACHABLE
+        message, cause = _unreachable_message(toolpath, reach, samples, orient, part)
     elif between.size:
-        status = _between_status(reach, samples, orient, between)
-    for name, move in (("entry", entry), ("exit", leave)):
-        if not move.ok and status == "ok":
-            status = (f"unreachable {name}: {move.reason}; move the part away from the walls "
-                      "(placement) or change the home pose")
-    if split["worst_swing_mm"] > SWING_TOL_MM and status == "ok":
-        status = (f"the nozzle would leave the path by {split['worst_swing_mm']:.2f} mm between "
-                  "two samples (a pose next to a singularity); move the part (placement) or "
-                  "the robot base")
-    if timing.status != "ok":
-        status = timing.status
-    report["status"] = status
+        status = PlanStatus.UNREACHABLE_BETWEEN
+        message = _between_status(reach, samples, orient, between)
+    for move, blocked in ((entry, PlanStatus.ENTRY_BLOCKED), (leave, PlanStatus.EXIT_BLOCKED)):
+        if not move.ok and status == PlanStatus.OK:
+            status = blocked
+            message = (f"{blocked}: {move.reason}; move the part away from the walls "
+                       "(placement) or change the home pose")
+    if split["worst_swing_mm"] > SWING_TOL_MM and status == PlanStatus.OK:
+        status = PlanStatus.SWING
+        message = (f"the nozzle would leave the path by {split['worst_swing_mm']:.2f} mm between "
+                   "two samples (a pose next to a singularity); move the part (placement) or "
+                   "the robot base")
+    if timing.status != "ok" and status == PlanStatus.OK:
+        status, message = PlanStatus.TIME_LAW, timing.status
+    with timer.stage("verify" + tag):
+        # whatever the stages decided: the executed trajectory against every limit
+        checked = verify(traj, samples.speed, reach)
+    report["verified"] = checked.as_report()
+    if checked.breaches and status == PlanStatus.OK:
+        b = checked.breaches[0]
+        status = b.status
+        layer = (f" (layer {int(toolpath.layer[b.waypoint])})" if b.waypoint >= 0 else "")
+        message = (f"{MESSAGES[b.status]}: {b.count} samples, the first after waypoint "
+                   f"{b.waypoint}{layer}, worst {b.detail}")
+    report["status"] = str(status)
+    report["message"] = message
+    report["cause"] = None if cause is None else str(cause)
     return PlanResult(traj, report, samples, orient, timing, placement, orient.clearance,
-                      status)
+                      status, message, cause)
+
+
+def _unreachable_message(toolpath: Toolpath, reach: Reach, samples: Samples,
+                         orient: Orientation, part: np.ndarray) -> tuple[str, Cause]:
+    """The first unreachable waypoint, its layer, position and cause (``refusal.cause_of``)."""
+    rows = np.flatnonzero((orient.status != OK) & (samples.waypoint >= 0) & (part == 1))
+    i = int(rows[0])
+    w = int(samples.waypoint[i])
+    code = int(orient.status[i])
+    pair = reach.collision.names[int(orient.pair[i])] if orient.pair[i] >= 0 else ""
+    cause = cause_of(code, pair, samples.normal[i])
+    x, y, z = (float(c) for c in toolpath.position[w])
+    return (f"{len(rows)} waypoints unreachable, the first waypoint {w} (layer "
+            f"{int(toolpath.layer[w])}, at {x:.1f}, {y:.1f}, {z:.1f} mm): {CAUSES[cause]}"
+            + (f" ({pair})" if pair and code == COLLISION else "")), cause
 
 
 def _upright_report(up: Upright, orient: Orientation, main: np.ndarray) -> dict[str, Any]:
@@ -654,6 +690,8 @@ def _report(
         "duration_s": traj.duration_s,
         "placement": {"offset_mm": list(placement.offset_mm), "yaw_deg": placement.yaw_deg,
                       "evaluated": placement.evaluated,
+                      "checked_waypoints": placement.checked,
+                      "waypoints_needing_tilt": placement.need_tilt,
                       "search_clearance_mm": placement.clearance_mm},
         "min_clearance_mm": float(clear[k]) if k >= 0 else None,
         "min_clearance_pair": names[orient.pair[k]] if k >= 0 and orient.pair[k] >= 0 else None,
@@ -679,7 +717,11 @@ def _report(
         if len(acc) else [0.0] * 6,
         "speed_ratio": {**_stats(ratio),
                         "within_5pct": float(np.mean(np.abs(ratio - 1) <= 0.05))
-                        if len(ratio) else 1.0},
+                        if len(ratio) else 1.0,
+                        # the same by extruded length (short steps at a turn weigh less)
+                        "within_5pct_length": float(
+                            np.sum(step[ex_step] * (np.abs(ratio - 1) <= 0.05))
+                            / max(float(step[ex_step].sum()), 1e-12)) if len(ratio) else 1.0},
         "over_deposition": {
             "volume_mm3": float(extra.sum()),
             "fraction": float(extra.sum() / max(C * planned.sum(), 1e-12)),

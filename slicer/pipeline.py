@@ -38,11 +38,13 @@ def slice_model(
     progress: Progress | None = None,
     until: Until = "toolpath",
     alpha: AlphaRange | None = None,
+    repair: bool = False,
 ) -> dict[str, Any]:
     """Slice ``model`` into ``out_dir``; returns the report written to ``report.json``.
 
     ``alpha`` is the printing-angle range of the cell the job is for (None: the bundled cell's);
-    the toolpath's step limits follow from it.
+    the toolpath's step limits follow from it. ``repair``: close every hole of an open surface
+    first (``slicer.repair``).
     """
     from slicer import mesh_io, tetrahedralize
 
@@ -58,6 +60,11 @@ def slice_model(
         if model.suffix.lower() in mesh_io.TET_SUFFIXES:
             given: TetMesh | None = mesh_io.load_tet_mesh(model, units=job.model)
             surface = _boundary_surface(given, model)  # type: ignore[arg-type]
+        elif repair:
+            from slicer.repair import load_repaired
+
+            given = None
+            surface = load_repaired(model, units=job.model)
         else:
             given = None
             surface = mesh_io.load_surface(model, units=job.model)
@@ -71,7 +78,10 @@ def slice_model(
 
     with timer.stage("tetrahedralize"):
         if given is None:
-            tetmesh, stats = tetrahedralize.tetrahedralize(surface, job.mesh, progress)
+            from slicer.tet_cache import cache_dir
+
+            tetmesh, stats = tetrahedralize.tetrahedralize(surface, job.mesh, progress,
+                                                           cache=cache_dir())
         else:
             tetmesh = given
             stats = tetrahedralize.quality(tetmesh.vertices, tetmesh.tets, surface.volume_mm3)

@@ -12,6 +12,9 @@ number), so its cost follows the box, not the solid. ``grading`` can hand it a s
 that grows the target edge length away from the solid; on the socket this did not make it
 measurably faster (fTetWild applies a sizing field only after its first optimisation passes),
 so it is off by default and kept for experiments (``bench/bench_tetwild.py``).
+
+fTetWild is not deterministic (not even on one thread); ``cache`` makes a slice repeatable by
+reading back the mesh made before for the same input and settings (``slicer.tet_cache``).
 """
 
 from __future__ import annotations
@@ -20,7 +23,8 @@ import contextlib
 import os
 import tempfile
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -84,6 +88,8 @@ class TetStats:
         snapped_mm_max: mm, the largest move of a refined boundary vertex onto the surface.
         refine_fallback: refine = "auto" meshed directly after the refined mesh failed or
             missed the solid's volume by more than ``AUTO_MAX_VOLUME_ERROR``.
+        cached: the mesh was read back from the cache (``slicer.tet_cache``), not made now
+            (the times are those of the run that made it).
     """
 
     tets: int
@@ -104,6 +110,7 @@ class TetStats:
     ftetwild_seconds: float = 0.0
     snapped_mm_max: float = 0.0
     refine_fallback: bool = False
+    cached: bool = False
 
     def as_dict(self) -> dict[str, Any]:
         """Plain values for report.json (``mesh`` section)."""
@@ -257,6 +264,7 @@ def tetrahedralize(
     progress: Progress | None = None,
     grading: float | None = None,
     threads: int = 0,
+    cache: Path | None = None,
 ) -> tuple[TetMesh, TetStats]:
     """Fill a closed surface with tets of about ``config.edge_length_mm`` using fTetWild.
 
@@ -268,6 +276,8 @@ def tetrahedralize(
             fTetWild as a sizing field; 0 = uniform target everywhere (fTetWild's own way).
             None = ``config.grading`` if the config has it, else ``DEFAULT_GRADING``.
         threads: fTetWild threads; 0 = all cores.
+        cache: folder of stored meshes (``slicer.tet_cache``): the mesh made earlier for the
+            same input and settings is read back, a new one stored; None = always mesh.
 
     Returns:
         The tet mesh (positively oriented tets, no unused vertices) and its statistics.
@@ -289,6 +299,24 @@ def tetrahedralize(
         )
     if grading is None:
         grading = float(getattr(config, "grading", DEFAULT_GRADING))
+    if cache is None:
+        return _fresh(surface, config, grading, threads, progress)
+    from slicer import tet_cache
+
+    key = tet_cache.cache_key(surface, config, grading)
+    hit = tet_cache.load(cache, key)
+    if hit is not None:
+        progress.update(1.0, f"{hit[1].tets} tets, {hit[1].vertices} vertices (the mesh made "
+                             "before for this model and settings)")
+        return hit[0], replace(hit[1], cached=True)
+    mesh, stats = _fresh(surface, config, grading, threads, progress)
+    tet_cache.store(cache, key, mesh, stats)
+    return mesh, stats
+
+
+def _fresh(surface: Surface, config: MeshConfig, grading: float, threads: int,
+           progress: Progress) -> tuple[TetMesh, TetStats]:
+    """A new mesh by fTetWild (and refinements, see ``tetrahedralize``)."""
     n_refine = refinements(config, surface.volume_mm3)
     if config.refine != "auto" or n_refine == 0:
         mesh, stats = _mesh(surface, config, n_refine, grading, threads, progress)

@@ -1,5 +1,8 @@
-"""Shared pytest setup: a non-interactive matplotlib backend for figure tests."""
+"""Shared pytest setup: a non-interactive matplotlib backend for figure tests, and the tet-mesh
+cache (slicer/tet_cache.py) in a folder of this test session, not the user's ~/.cache."""
 
 import os
+import tempfile
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+os.environ.setdefault("MESP_CACHE_DIR", tempfile.mkdtemp(prefix="mesp-test-cache-"))

@@ -51,7 +51,9 @@ def register(sub: Any) -> None:
 def run(args: argparse.Namespace) -> int:
     """Plan the job in ``args.dir`` and print a one-line summary."""
     from planner.cell import load_cell
+    from planner.other_cells import checked_fix, try_cells
     from planner.plan import plan
+    from planner.status import PlanStatus, Refused
     from slicer.report import update_report
     from slicer.stages import Toolpath
 
@@ -66,7 +68,13 @@ def run(args: argparse.Namespace) -> int:
     start = time.perf_counter()
     toolpath = Toolpath.load(job_dir)
     progress.info(f"planning {len(toolpath)} waypoints in {job_dir}")
-    result = plan(toolpath, cell, progress=progress)
+    try:
+        result = plan(toolpath, cell, progress=progress)
+    except Refused as exc:
+        # refused before motion: the fix names another bundled cell only if it plans there
+        progress.info(f"refused ({exc.cause}); trying the other bundled cells")
+        raise InputError(exc.problem, checked_fix(try_cells(toolpath, args.cell), exc.fix)) \
+            from exc
     result.trajectory.save(job_dir)
     report = dict(result.report)
     if not args.no_figures:
@@ -85,42 +93,31 @@ def run(args: argparse.Namespace) -> int:
     report["total_s"] = time.perf_counter() - start
     update_report(job_dir, {"plan": report})
     summary = {
-        "status": report["status"],
+        "status": str(report["status"]),
         "duration_s": round(report["duration_s"], 2),
         "min_clearance_mm": report["min_clearance_mm"],
         "unreachable": report["unreachable"]["count"],
         "over_deposition_mm3": round(report["over_deposition"]["volume_mm3"], 3),
     }
     progress.info(f"done: {json.dumps(summary)}; trajectory in {job_dir / 'trajectory.npz'}")
-    if report["unreachable"]["count"]:
-        first = report["unreachable"]["waypoints"][0]
-        progress.info(
-            f"warning: {report['unreachable']['count']} waypoints cannot be reached within the "
-            f"limits (first: {first['first']}, {first['reason']}); see plan.unreachable in "
-            "report.json"
-        )
-    if report["status"] != "ok":
-        # the trajectory is kept for inspection, but a cell would refuse it: say so and fail
-        print(f"mesp: error: the plan cannot be executed ({report['status']}); see plan in "
-              f"{job_dir / 'report.json'}; {_fix(report, toolpath)}", file=sys.stderr)
+    if result.status != PlanStatus.OK:
+        # the trajectory is kept for inspection, but a cell would refuse it: say why and what
+        # works (another bundled cell, tried here), then fail
+        progress.info(f"not executable ({result.status}); trying the other bundled cells")
+        fix = checked_fix(try_cells(toolpath, args.cell), _fix(result))
+        print(f"mesp: error: the plan cannot be executed ({result.status}): {result.message}; "
+              f"{fix}", file=sys.stderr)
         return 3
     return 0
 
 
-def _fix(report: dict[str, Any], toolpath: Any) -> str:
-    """What to do about a plan the cell cannot execute, by the first refused waypoint."""
-    unreachable = report["unreachable"]
-    if not unreachable["count"] or not unreachable["waypoints"]:
-        return "move the part or use a cell that reaches it"
-    first = unreachable["waypoints"][0]
-    i, reason = int(first["first"]), str(first["reason"])
-    x, y, z = (float(c) for c in toolpath.position[i])
-    where = f"waypoint {i} (layer {int(toolpath.layer[i])}, at {x:.1f}, {y:.1f}, {z:.1f} mm)"
-    if reason.startswith("printing angle"):
-        from planner.placement import BEND_FIX
+def _fix(result: Any) -> str:
+    """What to do about a plan the cell cannot execute: the fix of its first refused
+    waypoint's cause, else of its status."""
+    from planner.status import FIXES, PlanStatus
 
-        return f"at {where} {BEND_FIX}"
-    if "tank_wall" in reason:
-        return (f"at {where} the tool reaches the tank wall: move the part, or for a flat part "
-                "plan for the shallow tray (--cell planner/cells/tray.toml)")
-    return f"at {where} ({reason}): move the part or use a cell that reaches it"
+    if result.cause is not None:
+        return str(FIXES[result.cause])
+    if result.status in (PlanStatus.ENTRY_BLOCKED, PlanStatus.EXIT_BLOCKED, PlanStatus.SWING):
+        return "move the part ([placement] offset_mm, yaw_deg) or the robot base"
+    return "move the part or use a cell that reaches it"

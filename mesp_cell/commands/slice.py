@@ -50,6 +50,9 @@ def register(sub: Any) -> None:
         "replaces the job file's list)",
     )
     p.add_argument("--planar", action="store_true", help="planar slicing (g = z)")
+    p.add_argument("--repair", action="store_true",
+                   help="close every hole of an open surface (a scan) before slicing, and say "
+                   "what changed")
     p.add_argument(
         "--no-baselines",
         action="store_true",
@@ -113,8 +116,15 @@ def run(args: argparse.Namespace) -> int:
     from planner.cell import load_cell
 
     alpha = load_cell(args.cell).planning.alpha_range
-    report = slice_model(args.model, args.out, job, progress=progress, until=args.until,
-                         alpha=alpha)
+    try:
+        report = slice_model(args.model, args.out, job, progress=progress, until=args.until,
+                             alpha=alpha, repair=args.repair)
+    except InputError as exc:
+        if args.repair or "not watertight" not in exc.problem:
+            raise
+        from slicer.repair import repair_offer
+
+        raise repair_offer(args.model, job.model, exc) from exc
     summary = {
         "layers": report.get("slicing", {}).get("layers"),
         "waypoints": report.get("toolpath", {}).get("waypoints"),

@@ -70,8 +70,7 @@ def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
     cell = load_cell(Path(cell_file) if cell_file else None)
     result = plan(toolpath, cell)
     if result.status != "ok":
-        count = result.report.get("unreachable", {}).get("count", "")
-        raise InputError(f"plan refused: {result.status}" + (f" ({count})" if count else ""),
+        raise InputError(f"plan refused ({result.status}): {result.message}",
                          "move the model (cell [placement]) or change the job")
     result.trajectory.save(job_dir)
     update_report(job_dir, {"plan": result.report})

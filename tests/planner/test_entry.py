@@ -11,6 +11,7 @@ from planner.entry import PLUNGE, RETRACT, TRANSFER, safe_heights, safe_move, ti
 from planner.orientation import OK, Reach
 from planner.placement import fit_gel
 from planner.plan import PlanResult, plan
+from planner.status import PlanStatus
 from planner.timing import time_law
 from slicer.stages import Toolpath
 
@@ -114,8 +115,9 @@ def test_blocked_entry_is_reported(cell: CellConfig) -> None:
     wall_cell, tp = _wall_case(cell)
     result = plan(tp, wall_cell)
     assert result.report["unreachable"]["count"] == 0
-    assert result.status.startswith("unreachable entry: ")
-    assert "\n" not in result.status and "placement" in result.status  # one line, a fix
+    assert result.status == PlanStatus.ENTRY_BLOCKED
+    assert result.message.startswith("unreachable entry: ")
+    assert "\n" not in result.message and "placement" in result.message  # one line, a fix
     assert result.report["entry"]["status"] != "ok"
     assert np.all(np.diff(result.trajectory.t) > 0)  # still a well-formed trajectory
 

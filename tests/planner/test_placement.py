@@ -11,6 +11,7 @@ from planner.cell import CellConfig
 from planner.orientation import Reach
 from planner.placement import YAW_APART_DEG, choose_placement, fit_gel
 from planner.plan import plan
+from planner.status import PlanStatus
 from slicer.errors import InputError
 from slicer.stages import Toolpath
 from tests.planner import synthetic
@@ -134,6 +135,7 @@ def test_an_unreachable_waypoint_is_replanned_at_another_placement(
         yaws.append(result.placement.yaw_deg)
         if len(yaws) == 1:  # as if one waypoint were out of reach there
             result.report["unreachable"]["count"] = 1
+            return dataclasses.replace(result, status=PlanStatus.UNREACHABLE)
         return result
 
     monkeypatch.setattr(plan_module, "_plan_placed", first_one_refused)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ from mesp_cell.cli import main
 from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.plan import PlanResult, plan
+from planner.refusal import bends
 from planner.trajectory import Trajectory
 from slicer.report import read_report
 from slicer.stages import Toolpath
@@ -138,19 +140,17 @@ def test_a_path_bending_up_out_of_its_layer_is_refused_with_a_fix(
     tp = make_toolpath(pos, np.tile([0.0, 0.0, 1.0], (len(pos), 1)),
                        np.zeros(len(pos), np.int32))
     tp.save(tmp_path)
-    # on so small a path the placement search samples the bend: refused before planning
+    # no placement can help: refused before the search, on every waypoint, with the cause,
+    # the layer and the alpha range that would serve it (checked by the same test)
     code = main(["plan", str(tmp_path), "--quiet", "--no-figures"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1
-    assert "waypoint 21" in err[0] and "bends too sharply" in err[0] and "re-slice" in err[0]
-    # where the search's sample misses it, the plan's refusal names the layer and the spot
-    from mesp_cell.commands.plan import _fix
-
-    def report(reason: str) -> dict[str, object]:
-        return {"unreachable": {"count": 1, "waypoints": [
-            {"first": 21, "last": 21, "reason": reason}]}}
-
-    fix = _fix(report("printing angle alpha outside the allowed range"), tp)
-    assert "waypoint 21 (layer 0, at 10.0, 0.0, 5.8 mm)" in fix and "re-slice" in fix
-    assert "tray" in _fix(report("collision (extruder vs tank_wall_+y)"), tp)
-    assert "move the part" in _fix(report("near a singularity"), tp)
+    assert "waypoint 20 (layer 0, at 10.0, 0.0, 5.0 mm)" in err[0]
+    assert "bends against its layer" in err[0] and "re-slice" in err[0]
+    assert "tried tray: refused (bend)" in err[0]
+    found = bends(tp, cell)
+    assert list(found.waypoint) == [20, 21, 22]
+    half = float(np.ceil(found.needed_deg.max()))
+    wide = replace(cell, planning=replace(cell.planning, alpha_min_deg=90 - half,
+                                          alpha_max_deg=90 + half))
+    assert len(bends(tp, wide).waypoint) == 0  # the suggested range serves them

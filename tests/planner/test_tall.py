@@ -165,3 +165,18 @@ def test_the_tray_cell_takes_a_steep_edge_the_deep_tank_refuses(cell: CellConfig
     shallow = plan(tp, tray).report
     assert shallow["status"] == "ok" and shallow["unreachable"]["count"] == 0
     assert shallow["min_clearance_mm"] >= tray.planning.clearance_mm - 1e-6
+
+
+def test_the_fix_names_a_bundled_cell_only_where_the_job_planned() -> None:
+    # the deep tank refuses the steep edge (above), the tray plans it: `mesp plan` tries the
+    # other bundled cells and names the tray because it planned there, and says so
+    from planner.other_cells import checked_fix, try_cells
+
+    trials = try_cells(_steep_edge(60.0), None)
+    assert [t.name for t in trials] == ["tray"] and trials[0].ok
+    fix = checked_fix(trials, "use a wider tank")
+    assert fix.startswith("plan with --cell ") and fix.endswith(
+        "tray.toml (checked: the job plans ok in the tray cell)")
+    refused = trials[0]._replace(ok=False, reason="refused (wall)")
+    assert checked_fix([refused], "use a wider tank") == (
+        "use a wider tank (no bundled cell plans it either; tried tray: refused (wall))")

@@ -1,0 +1,96 @@
+"""`mesp check MODEL [--job JOB.toml] [--cell CELL.toml]`: does the part fit, before slicing."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from slicer.errors import InputError
+
+HELP = """\
+Preflight a model in seconds, without tetrahedralising or slicing it: whether it fits the
+cell (footprint in the tank, height under the gel, the arm's reach with the nozzle vertical),
+whether its units look wrong (a part a few mm or several m across; --units suggested where
+another unit fits), and which critical surfaces the slicer would fix (one line each, and a
+PNG of the chosen patches). An open surface is checked as `mesp slice --repair` would close
+it. Exit 0 when everything fits, 1 when something does not (each problem says its fix).
+"""
+
+
+def register(sub: Any) -> None:
+    """Add the `check` sub-command."""
+    p = sub.add_parser(
+        "check",
+        help="preflight: does the model fit the cell, units, critical surfaces (seconds)",
+        description=HELP,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("model", type=Path, help="STL/OBJ/PLY surface")
+    p.add_argument("--job", type=Path, metavar="JOB.toml", help="job file (units, critical)")
+    p.add_argument("--cell", type=Path, metavar="CELL.toml",
+                   help="cell description overriding the bundled default")
+    p.add_argument("--units", choices=["mm", "cm", "m", "in"], help="units of the model file")
+    p.add_argument("--critical", action="append", metavar="SELECTOR",
+                   help="critical region selector as for `mesp slice` (repeatable)")
+    p.add_argument("--figure", type=Path, metavar="PNG",
+                   help="where to draw the critical patches (default: MODEL-check.png in the "
+                   "current directory)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Print one line per finding; exit 1 if the part does not fit."""
+    from planner.cell import load_cell
+    from planner.other_cells import bundled_cells
+    from planner.preflight import preflight
+    from planner.preflight_figure import critical_patches_png
+    from slicer.config import load_job
+    from slicer.mesh_io import load_surface
+    from slicer.repair import load_repaired
+
+    start = time.perf_counter()
+    job = load_job(args.job)
+    overrides: dict[str, dict[str, Any]] = {}
+    if args.units:
+        overrides["model"] = {"units": args.units}
+    if args.critical:
+        overrides["slicing"] = {"critical": tuple(args.critical)}
+    if overrides:
+        job = job.with_overrides(**overrides)
+    cell = load_cell(args.cell)
+    # any size is read: a part of 8 m or 8 um is what the units finding is for
+    units = replace(job.model, max_size_mm=1e12, min_size_mm=1e-12)
+    try:
+        surface = load_surface(args.model, units)
+    except InputError as exc:
+        if "not watertight" not in exc.problem or "open edges" not in exc.problem:
+            raise
+        surface = load_repaired(args.model, units)  # raises if --repair cannot close it
+        print(f"open surface: {exc.problem}; slice with --repair, which "
+              f"{surface.notes[0].removeprefix('--repair: ')}")
+    others = {name: load_cell(path) for name, path in bundled_cells()
+              if not (path is None and args.cell is None)
+              and not (path is not None and args.cell is not None
+                       and path.resolve() == args.cell.resolve())}
+    result = preflight(surface, job, cell, others)
+    for f in result.findings:
+        print(f"{f.topic:>8}: {'ok' if f.ok else 'PROBLEM'}: {f.text}")
+    figure = args.figure or Path(f"{args.model.stem}-check.png")
+    labels = [f"{k}: {r.selector}, {r.area:.0f} mm^2"
+              for k, r in enumerate(result.selection.regions)]
+    try:
+        critical_patches_png(result.patches, result.face_region, labels, figure)
+        print(f"  figure: {figure} (critical patches in colour); checked in "
+              f"{time.perf_counter() - start:.1f} s")
+    except OSError as exc:
+        raise InputError(f"cannot write {figure} ({exc.strerror})",
+                         "give a writable path with --figure") from exc
+    problems = [f for f in result.findings if not f.ok]
+    if problems:
+        print(f"mesp: error: {problems[0].text}", file=sys.stderr)
+        return 1
+    return 0

@@ -1,0 +1,137 @@
+"""Repair of open scans on request (``mesp slice --repair``): every hole closed, and said so.
+
+``mesh_io.load_surface`` fills only cracks (holes small against the model) and refuses a real
+opening rather than guess it shut. A scan or a CT segmentation is often open where the scanner
+did not see (the top of a limb, the eyes of a head): with ``--repair`` the user asks for
+every hole to be closed. Each boundary loop (a connected chain of edges used by one face) is
+closed by a fan of triangles around the loop's centroid, wound like its neighbours; the
+closed surface then goes through ``load_surface``'s checks (size, winding, volume) like any
+other. What changed (holes, open edges, area added, the largest hole) is one line in the
+surface's notes, so the report and the command say it.
+"""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from slicer.config import ModelConfig
+from slicer.errors import InputError
+from slicer.mesh_io import Surface, load_surface
+
+
+@dataclass(frozen=True)
+class HoleFill:
+    """What ``fill_holes`` changed.
+
+    Attributes:
+        holes: boundary loops closed.
+        open_edges: edges used by one face before the fill.
+        area_added: area of the new triangles, in the mesh's units squared.
+        largest_perimeter: the longest loop's perimeter, in the mesh's units.
+    """
+
+    holes: int
+    open_edges: int
+    area_added: float
+    largest_perimeter: float
+
+
+def fill_holes(vertices: np.ndarray, faces: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, HoleFill]:
+    """Close every boundary loop with a fan around its centroid.
+
+    Args:
+        vertices: (n, 3) float64. faces: (m, 3) int, vertices merged (shared edges use the
+            same two vertex indices).
+
+    Returns:
+        (vertices (n + k, 3) with one centroid per loop, faces (m + e, 3) with one new
+        triangle per open edge, the summary). Each open half-edge (a, b) gets the triangle
+        (b, a, centroid), so the new faces turn like the face they border.
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    n = len(vertices)
+    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    ends = np.sort(directed, axis=1)
+    _, edge_id, uses = np.unique(ends[:, 0] * n + ends[:, 1], return_inverse=True,
+                                 return_counts=True)
+    boundary = directed[uses[edge_id] == 1]
+    if not len(boundary):
+        return np.asarray(vertices), faces, HoleFill(0, 0, 0.0, 0.0)
+    labels = trimesh.graph.connected_component_labels(boundary, node_count=n)
+    _, loop = np.unique(labels[boundary[:, 0]], return_inverse=True)
+    count = np.bincount(loop)
+    centres = np.column_stack([np.bincount(loop, weights=vertices[boundary[:, 0], i])
+                               for i in range(3)]) / count[:, None]
+    new_v = np.vstack([vertices, centres])
+    new_f = np.column_stack([boundary[:, 1], boundary[:, 0], n + loop])
+    tri = new_v[new_f]
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    length = np.linalg.norm(vertices[boundary[:, 0]] - vertices[boundary[:, 1]], axis=1)
+    perimeter = np.bincount(loop, weights=length)
+    return new_v, np.vstack([faces, new_f]), HoleFill(
+        len(count), len(boundary), float(area.sum()), float(perimeter.max()))
+
+
+def load_repaired(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
+    """``load_surface``, with every hole closed first where the surface is open.
+
+    A closed surface is loaded as it is (a note says there was nothing to repair).
+
+    Raises:
+        InputError: what ``load_surface`` raises for a reason other than an open surface,
+            or the surface is still not closed after the fill (non-manifold edges).
+    """
+    path = Path(path)
+    try:
+        surface = load_surface(path, units)
+    except InputError as exc:
+        if "not watertight" not in exc.problem or "open edges" not in exc.problem:
+            raise
+    else:
+        return replace(surface, notes=(*surface.notes, "--repair: the surface is closed, "
+                                                       "nothing to repair"))
+    mesh = trimesh.load_mesh(path, file_type=path.suffix.lower().lstrip("."), process=False)
+    if isinstance(mesh, trimesh.Scene):
+        mesh = mesh.to_geometry()
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    mesh.update_faces(mesh.unique_faces() & mesh.nondegenerate_faces())
+    vertices, faces, fill = fill_holes(np.asarray(mesh.vertices, dtype=np.float64),
+                                       np.asarray(mesh.faces))
+    with tempfile.TemporaryDirectory(prefix="mesp-repair-") as scratch:
+        closed = Path(scratch) / f"{path.stem}.ply"
+        trimesh.Trimesh(vertices, faces, process=False).export(closed)
+        try:
+            surface = load_surface(closed, units)
+        except InputError as exc:
+            raise InputError(
+                f"{path.name} stays open after --repair filled {fill.holes} holes "
+                f"({exc.problem.replace(closed.name, 'the filled surface')})",
+                "its surface is not a set of clean holes (edges shared by 3 faces, or "
+                "overlapping sheets): close it in a mesh editor (e.g. Blender 3D-Print "
+                "Toolbox, Meshmixer)") from exc
+    scale = (units.scale_mm if isinstance(units, ModelConfig)
+             else ModelConfig(units=units).scale_mm)  # type: ignore[arg-type]
+    line = (f"--repair: filled {fill.holes} hole{'s' if fill.holes != 1 else ''} "
+            f"({fill.open_edges} open edges, largest {fill.largest_perimeter * scale:.1f} mm "
+            f"round), added {fill.area_added * scale**2:.0f} mm^2 of surface")
+    return replace(surface, source=path, notes=(line, *surface.notes))
+
+
+def repair_offer(path: str | Path, units: str | ModelConfig, refusal: InputError
+                 ) -> InputError:
+    """The refusal of an open surface with ``--repair`` as its fix where the repair was
+    tried here and closes it; ``refusal`` unchanged otherwise."""
+    if "not watertight" not in refusal.problem or "open edges" not in refusal.problem:
+        return refusal
+    try:
+        repaired = load_repaired(path, units)
+    except InputError:
+        return refusal
+    what = repaired.notes[0].removeprefix("--repair: ")
+    return InputError(refusal.problem, f"re-run with --repair (checked: it {what})")

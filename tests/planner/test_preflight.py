@@ -1,0 +1,76 @@
+"""Preflight: fit, units and critical surfaces of a model in seconds, and `mesp check`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from mesp_cell.cli import main
+from planner.cell import CellConfig, load_cell
+from planner.preflight import fits_gel, fits_tank, preflight
+from slicer.config import load_job
+from slicer.mesh_io import load_surface
+
+
+def _box(path: Path, size: tuple[float, float, float]) -> Path:
+    box = trimesh.creation.box(extents=size)
+    box.apply_translation(np.array(size) / 2)
+    box.export(path)
+    return path
+
+
+def test_fit_of_footprint_and_height(cell: CellConfig) -> None:
+    inner = cell.tank.inner_size_mm[0] - 2 * cell.placement.wall_margin_mm
+    assert fits_tank(cell, np.array([inner - 1.0, 50.0, 20.0])) == 0.0
+    # a long bar fits only turned diagonally
+    assert fits_tank(cell, np.array([1.2 * inner, 20.0, 20.0])) == 45.0
+    assert fits_tank(cell, np.array([2.0 * inner, 20.0, 20.0])) is None
+    assert fits_gel(cell, cell.tank.gel_fill_mm - cell.placement.offset_mm[2])
+    assert not fits_gel(cell, cell.tank.gel_fill_mm)
+
+
+def test_a_plausible_part_fits_and_names_its_critical_region(tmp_path: Path,
+                                                            cell: CellConfig) -> None:
+    surface = load_surface(_box(tmp_path / "b.stl", (40.0, 30.0, 20.0)))
+    result = preflight(surface, load_job(), cell)
+    assert result.ok, result.findings
+    topics = [f.topic for f in result.findings]
+    assert topics == ["size", "units", "tank", "gel", "reach", "critical"]
+    critical = result.findings[-1].text
+    assert critical.startswith("1 critical region (1200 mm^2): bottom:45@end 1200 mm^2")
+    assert np.isclose(result.selection.regions[0].area, 1200.0)
+
+
+def test_an_8_mm_part_suggests_other_units(tmp_path: Path, cell: CellConfig) -> None:
+    surface = load_surface(_box(tmp_path / "b.stl", (8.0, 6.0, 4.0)))
+    units = preflight(surface, load_job(), cell).findings[1]
+    assert not units.ok and "--units cm makes it 80 mm" in units.text
+
+
+def test_a_tall_part_fails_the_gel_and_names_no_wrong_cell(tmp_path: Path) -> None:
+    cell = load_cell()
+    tray = load_cell(Path(__file__).parents[2] / "planner" / "cells" / "tray.toml")
+    surface = load_surface(_box(tmp_path / "b.stl", (40.0, 40.0, 120.0)))
+    # in the tray (80 mm of gel) it does not fit; the default cell (240 mm) holds it
+    found = {f.topic: f for f in preflight(surface, load_job(), tray, {"default": cell}).findings}
+    assert not found["gel"].ok and "it fits the bundled default cell" in found["gel"].text
+    assert "reach" not in found  # not asked where the part does not fit
+
+
+def test_mesp_check_answers_and_draws(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                      ) -> None:
+    model = _box(tmp_path / "part.stl", (40.0, 30.0, 20.0))
+    png = tmp_path / "part.png"
+    assert main(["check", str(model), "--figure", str(png)]) == 0
+    out = capsys.readouterr().out
+    assert "reach: ok" in out and "critical: ok: 1 critical region" in out
+    assert png.is_file() and png.stat().st_size > 10_000
+    small = _box(tmp_path / "tiny.stl", (0.8, 0.6, 0.4))  # a part in cm read as mm
+    assert main(["check", str(small), "--figure", str(png)]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("mesp: error: 0.8 mm across")
+    assert "--units m makes it 800 mm" not in err[0]  # 800 mm does not fit the tank
+    assert "--units in makes it 20 mm" in err[0]
