@@ -57,6 +57,9 @@ def test_launch_submit_pause_resume_abort_and_ctrl_c(home: Path, tmp_path: Path,
         capsys.readouterr()
         assert mesp("job", "submit", str(model)) == 0
         job_id = capsys.readouterr().out.split()[1]
+        wait_for(lambda: client.status(job_id).state == "ready_check",
+                 what=lambda: client.status(job_id))
+        assert mesp("job", "ready", job_id) == 0
         wait_for(lambda: client.status(job_id).percent > 20, what=lambda: client.status(job_id))
         assert mesp("job", "pause", job_id) == 0
         wait_for(lambda: client.status(job_id).state == "paused")
@@ -85,7 +88,11 @@ def test_launch_submit_pause_resume_abort_and_ctrl_c(home: Path, tmp_path: Path,
 
         states: list[ExtruderState] = []
         client.bus().subscribe("extruder", "state", ExtruderState, states.append)
+        capsys.readouterr()
         assert mesp("estop", "--reason", "console test") == 0
+        said = capsys.readouterr().out
+        assert "robot: stopped and latched at" in said and "console test" in said, said
+        assert "extruder: motor off, e-stop latched" in said, said
         wait_for(lambda: bool(states) and bool(states[-1].fault & 0x8))
         assert mesp("estop", "--reset") == 0
         wait_for(lambda: states[-1].fault == 0)

@@ -1,10 +1,22 @@
-"""The supervisor's ETA: from the pace the stream keeps."""
+"""The supervisor: the ETA from the pace the stream keeps; the tank-ready gate and the abort's
+retract over the real processes (synthetic slicing and planning, the kinematic twin)."""
 
 from __future__ import annotations
 
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
 import pytest
 
+from mesp_cell.jobs import JobRecord
+from mesp_cell.launcher import CellClient, Launch, start_cell
+from mesp_cell.messages import RobotState
 from mesp_cell.nodes.supervisor_node import EtaEstimate
+from planner.cell import load_cell
+from slicer.errors import InputError
 
 
 def test_eta_follows_the_measured_pace_not_the_asked_one() -> None:
@@ -21,3 +33,94 @@ def test_eta_follows_the_measured_pace_not_the_asked_one() -> None:
         left = stalled(float(t), 10, 1000)
     assert left == pytest.approx(1000 / 40_000)
     assert stalled(5.0, 10, -3) == 0.0
+
+
+@pytest.fixture(scope="module")
+def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Launch]:
+    home = tmp_path_factory.mktemp("mesp_home")
+    old = os.environ.get("MESP_HOME")
+    os.environ["MESP_HOME"] = str(home)
+    launch = start_cell(overrides={"slice_fn": "tests.mesp_cell.synthetic:slice_job",
+                                   "plan_fn": "tests.mesp_cell.synthetic:plan_job",
+                                   "prime_s": 0.1, "robot_backend": "twin"})
+    try:
+        yield launch
+    finally:
+        launch.stop()
+        if old is None:
+            os.environ.pop("MESP_HOME", None)
+        else:
+            os.environ["MESP_HOME"] = old
+
+
+def _wait_state(client: CellClient, job_id: str, state: str, timeout: float = 30.0) -> JobRecord:
+    end = time.monotonic() + timeout
+    job = client.status(job_id)
+    while job.state != state and time.monotonic() < end:
+        time.sleep(0.02)
+        job = client.status(job_id)
+    assert job.state == state, job
+    return job
+
+
+def test_after_an_abort_the_next_job_waits_and_nothing_moves_until_confirmed(
+        cell: Launch, tmp_path: Path) -> None:
+    model = tmp_path / "ring.stl"
+    model.write_text("solid ring\nendsolid ring\n")
+    client = cell.client()
+    states: list[RobotState] = []
+    client.bus().subscribe("robot", "state", RobotState, states.append)
+    try:
+        first = client.submit(model)
+        second = client.submit(model)
+        _wait_state(client, first.id, "ready_check")
+        # the first job of the session waits too: nothing streams or moves
+        time.sleep(1.0)
+        assert client.status(first.id).state == "ready_check"
+        assert client.status(second.id).state == "planned"  # one job waits at a time
+        assert {s.mode for s in states[-50:]} == {"idle"}
+        client.confirm_ready(first.id)
+        end = time.monotonic() + 30
+        while client.status(first.id).percent < 30 and time.monotonic() < end:
+            time.sleep(0.02)
+        reply = client.command("abort", first.id)
+        assert reply.ok, reply.reason
+        aborted = client.wait(first.id, timeout=20)
+        assert aborted.state == "aborted"
+        assert aborted.reason == ("aborted by the operator; nozzle retracted along its axis "
+                                  "out of the gel and parked at home")
+        home = load_cell(None).robot.home_deg  # the robot node's home: the bundled cell's
+        assert np.abs(np.subtract(states[-1].q, home)).max() < 0.05  # parked at home
+        # the next job waits for the operator: nothing moves until the confirmation
+        _wait_state(client, second.id, "ready_check")
+        n = len(states)
+        time.sleep(2.0)
+        assert client.status(second.id).state == "ready_check"
+        still = states[n:]
+        assert len(still) > 50 and {s.mode for s in still} == {"idle"}
+        assert np.ptp([s.q for s in still], axis=0).max() < 1e-6
+        client.confirm_ready(second.id)
+        done = client.wait(second.id, timeout=30)
+        assert done.state == "done", done.reason
+    finally:
+        client.close()
+
+
+def test_ready_and_resume_are_refused_while_the_estop_is_latched(cell: Launch,
+                                                                 tmp_path: Path) -> None:
+    model = tmp_path / "ring.stl"
+    model.write_text("solid ring\nendsolid ring\n")
+    client = cell.client()
+    try:
+        job = client.submit(model)
+        _wait_state(client, job.id, "ready_check")
+        client.estop("test")
+        with pytest.raises(InputError, match=r"cannot ready job .*e-stop from .*test"):
+            client.confirm_ready(job.id)
+        assert client.reset_estop() == []
+        client.confirm_ready(job.id)
+        assert client.wait(job.id, timeout=30).state == "done"
+        with pytest.raises(InputError, match="done; only a job waiting in ready_check"):
+            client.confirm_ready(job.id)
+    finally:
+        client.close()
