@@ -339,7 +339,8 @@ async def broadcaster(ctx: ConsoleContext, news: asyncio.Event) -> None:
             last_poll = now
             jobs = jobs_message(ctx)
             key = repr([(j["id"], j["state"], j["reason"], j["ready_confirmed"],
-                         j["resume_pending"]) for j in jobs["jobs"]])
+                         j["resume_pending"], j["layer"], int(j["percent"]))
+                        for j in jobs["jobs"]])
             if key != last_jobs:
                 last_jobs = key
                 msgs.append(jobs)

@@ -192,7 +192,16 @@ function drawPreview() {
   const trace = { type: "scatter3d", mode: "lines", x, y, z,
     line: { color: c, colorscale: "Viridis", width: 3, showscale: true, colorbar: { title: { text: unit } } },
     hoverinfo: "skip" };
-  const layout = { margin: { l: 0, r: 0, t: 0, b: 0 }, scene: { aspectmode: "data" }, uirevision: "keep" };
+  // true proportions in x and y; a flat part keeps some height so its layers stay apart
+  const span = (a) => {
+    let lo = Infinity, hi = -Infinity;
+    for (const q of a) if (q !== null) { if (q < lo) lo = q; if (q > hi) hi = q; }
+    return hi > lo ? hi - lo : 1;
+  };
+  const dx = span(pv.x), dy = span(pv.y), dz = span(pv.z), m = Math.max(dx, dy, dz, 1e-6);
+  const layout = { margin: { l: 0, r: 0, t: 0, b: 0 }, uirevision: "keep",
+    scene: { aspectmode: "manual", aspectratio: { x: dx / m, y: dy / m, z: Math.max(dz / m, 0.3) },
+      camera: { eye: { x: 1.4, y: -1.4, z: 1.0 } } } };
   Plotly.react("plot", [trace], layout, { displaylogo: false, responsive: true });
   $("plot").dataset.points = String(x.filter((v) => v !== null).length);
 }
