@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import logging
 import threading
 import time
 from collections.abc import AsyncIterator, Callable
@@ -34,6 +35,7 @@ from mesp_cell.web.token import bearer_ok
 from mesp_cell.web.uploads import TooLarge, store_upload
 from slicer.errors import InputError
 
+log = logging.getLogger("mesp.console")
 STATIC = Path(__file__).resolve().parent / "static"
 LIVE_PERIOD_S = 0.2  # the stream's period without news (the supervisor publishes at 5 Hz)
 
@@ -333,17 +335,21 @@ async def broadcaster(ctx: ConsoleContext, news: asyncio.Event) -> None:
         news.clear()
         if not ctx.clients:
             continue
-        msgs = [await asyncio.to_thread(ctx.live.snapshot, job_of)]
-        now = time.monotonic()
-        if now - last_poll >= 0.25:
-            last_poll = now
-            jobs = jobs_message(ctx)
-            key = repr([(j["id"], j["state"], j["reason"], j["ready_confirmed"],
-                         j["resume_pending"], j["layer"], int(j["percent"]))
-                        for j in jobs["jobs"]])
-            if key != last_jobs:
-                last_jobs = key
-                msgs.append(jobs)
+        try:
+            msgs = [await asyncio.to_thread(ctx.live.snapshot, job_of)]
+            now = time.monotonic()
+            if now - last_poll >= 0.25:
+                last_poll = now
+                jobs = jobs_message(ctx)
+                key = repr([(j["id"], j["state"], j["reason"], j["ready_confirmed"],
+                             j["resume_pending"], j["layer"], int(j["percent"]))
+                            for j in jobs["jobs"]])
+                if key != last_jobs:
+                    last_jobs = key
+                    msgs.append(jobs)
+        except Exception:  # the stream must outlive a bad artifact or a busy store
+            log.exception("live stream")
+            continue
         for q in list(ctx.clients):
             for m in msgs:
                 if q.full():

@@ -3,20 +3,19 @@ retract over the real processes (synthetic slicing and planning, the kinematic t
 
 from __future__ import annotations
 
-import os
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from mesp_cell.jobs import JobRecord
-from mesp_cell.launcher import CellClient, Launch, start_cell
+from mesp_cell.launcher import CellClient, Launch
 from mesp_cell.messages import RobotState
 from mesp_cell.nodes.supervisor_node import EtaEstimate
 from planner.cell import load_cell
 from slicer.errors import InputError
+from tests.mesp_cell.conftest import Console
 
 
 def test_eta_follows_the_measured_pace_not_the_asked_one() -> None:
@@ -35,22 +34,9 @@ def test_eta_follows_the_measured_pace_not_the_asked_one() -> None:
     assert stalled(5.0, 10, -3) == 0.0
 
 
-@pytest.fixture(scope="module")
-def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Launch]:
-    home = tmp_path_factory.mktemp("mesp_home")
-    old = os.environ.get("MESP_HOME")
-    os.environ["MESP_HOME"] = str(home)
-    launch = start_cell(overrides={"slice_fn": "tests.mesp_cell.synthetic:slice_job",
-                                   "plan_fn": "tests.mesp_cell.synthetic:plan_job",
-                                   "prime_s": 0.1, "robot_backend": "twin"})
-    try:
-        yield launch
-    finally:
-        launch.stop()
-        if old is None:
-            os.environ.pop("MESP_HOME", None)
-        else:
-            os.environ["MESP_HOME"] = old
+@pytest.fixture
+def cell(console: Console) -> Launch:
+    return console.launch
 
 
 def _wait_state(client: CellClient, job_id: str, state: str, timeout: float = 30.0) -> JobRecord:
@@ -115,7 +101,7 @@ def test_ready_and_resume_are_refused_while_the_estop_is_latched(cell: Launch,
         job = client.submit(model)
         _wait_state(client, job.id, "ready_check")
         client.estop("test")
-        with pytest.raises(InputError, match=r"cannot ready job .*e-stop from .*test"):
+        with pytest.raises(InputError, match=r"cannot ready job .*e-stop.*mesp estop --reset"):
             client.confirm_ready(job.id)
         assert client.reset_estop() == []
         client.confirm_ready(job.id)

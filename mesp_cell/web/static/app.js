@@ -58,9 +58,10 @@ function onLive(msg) {
   state.live = msg;
   const st = window.liveStats;
   if (msg.job && msg.seq !== st.lastSeq) {
+    const first = st.lastSeq === -1;  // the console's last message, maybe from long ago
     st.lastSeq = msg.seq;
-    st.progress++;
-    st.delays.push(Date.now() / 1000 - msg.job.progress_t);
+    if (!first) st.progress++;
+    if (!first) st.delays.push(Date.now() / 1000 - msg.job.progress_t);
     if (st.delays.length > 1000) st.delays.shift();
   }
   $("nodes").innerHTML = ["supervisor", "robot", "extruder", "slicer", "planner"].map(
@@ -69,6 +70,14 @@ function onLive(msg) {
   if (ext.estop) showEstop("E-STOP latched" + (state.estopText ? ": " + state.estopText : ""));
   else if (!state.estopPending) showEstop("");
   const j = msg.job;
+  const cur = state.jobs.find((x) => ["printing", "paused", "interrupted"].includes(x.state));
+  if (cur && (!j || cur.id !== j.job_id)) {  // stopped before its first progress message
+    $("cur-id").textContent = cur.id;
+    $("cur-state").textContent = cur.state;
+    $("bar-fill").style.width = cur.percent.toFixed(1) + "%";
+    $("bar-text").textContent = `${cur.percent.toFixed(1)} % of the time`;
+    return;
+  }
   if (!j) return;
   const printing = j.state === "printing";
   $("cur-id").textContent = j.job_id;

@@ -10,7 +10,7 @@ from typing import Any
 
 from websockets.sync.client import connect
 
-from tests.mesp_cell.web.conftest import Console
+from tests.mesp_cell.conftest import Console
 
 
 class LiveRecorder:

@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 
-from tests.mesp_cell.web.conftest import Console
+from tests.mesp_cell.conftest import Console
 
 CUBE = Path(__file__).resolve().parents[3] / "examples" / "cube.stl"
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"

@@ -24,7 +24,7 @@ def test_no_client_name_becomes_a_path(tmp_path: Path) -> None:
 
 
 def test_refused_uploads_leave_nothing(tmp_path: Path) -> None:
-    with pytest.raises(InputError, match="unsupported type '.exe'"):
+    with pytest.raises(InputError, match=r"unsupported type '\.exe'"):
         store_upload(tmp_path, io.BytesIO(b"x"), "a.exe", None, 1 << 20)
     with pytest.raises(TooLarge, match="larger than 1 MiB"):
         store_upload(tmp_path, io.BytesIO(b"x" * ((1 << 20) + 1)), "a.stl", None, 1 << 20)

@@ -1,6 +1,7 @@
-"""One simulated cell with its console for the console's API and browser tests: real processes
-on the real bus (synthetic slicing and planning, the kinematic twin at half speed so a print
-lasts long enough to pause it), with a bearer token configured, so the motion endpoints need
+"""One simulated cell with its console for the supervisor's and the console's tests over the
+real processes: the real bus, synthetic slicing and a synthetic trajectory that starts and ends
+at the cell's home (no long approach move), the kinematic twin at half speed so a print lasts
+long enough to pause it, and a bearer token configured, so the console's motion endpoints need
 it even on loopback."""
 
 from __future__ import annotations
@@ -13,11 +14,23 @@ from pathlib import Path
 from typing import Any
 
 import httpx
+import numpy as np
 import pytest
 
 from mesp_cell.launcher import Launch, bundled_launch, start_cell
 from mesp_cell.web.node import console_urls
 from mesp_cell.web.token import load_token
+from planner.cell import load_cell
+from slicer.artifacts import save_npz
+from tests.mesp_cell import synthetic
+
+
+def plan_at_home(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
+    """``synthetic.plan_job``'s trajectory moved to start at the bundled cell's home."""
+    arrays = synthetic.trajectory_arrays(synthetic.LAYERS * synthetic.PER_LAYER)
+    arrays["q"] = arrays["q"] - synthetic.HOME + np.radians(load_cell(None).robot.home_deg)
+    save_npz(Path(job_dir) / "trajectory.npz", arrays)
+    return {}
 
 
 @dataclass
@@ -60,7 +73,7 @@ class Console:
         return str(r.json()["id"])
 
 
-@pytest.fixture(scope="package")
+@pytest.fixture(scope="session")
 def console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
     home = tmp_path_factory.mktemp("console_home")
     old = os.environ.get("MESP_HOME")
@@ -73,7 +86,7 @@ def console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
     launch_file.write_text(text.replace("[process.params.servo]\n",
                                         "[process.params.servo]\noverrun_s = 1.0\n", 1))
     launch = start_cell(launch_file, overrides={"slice_fn": "tests.mesp_cell.synthetic:slice_job",
-                                   "plan_fn": "tests.mesp_cell.synthetic:plan_job",
+                                   "plan_fn": "tests.mesp_cell.conftest:plan_at_home",
                                    "prime_s": 0.1, "robot_backend": "twin",
                                    "time_scale": 0.5, "console_port": "auto",
                                    "console_max_upload_mb": 1})
@@ -93,5 +106,5 @@ def console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
 def ring(tmp_path: Path) -> Path:
     """A real mesh (the bundled cube) under another name; the synthetic slicer ignores it."""
     path = tmp_path / "ring.stl"
-    path.write_bytes((Path(__file__).resolve().parents[3] / "examples" / "cube.stl").read_bytes())
+    path.write_bytes((Path(__file__).resolve().parents[2] / "examples" / "cube.stl").read_bytes())
     return path
