@@ -95,6 +95,11 @@ def job_json(job: JobRecord, history: list[tuple[float, str, str, str]] | None =
     return out
 
 
+def figure_files(job_dir: Path) -> dict[str, Path]:
+    """The job's PNG figures by name (the job directory and its ``figures/``)."""
+    return {p.name: p for p in (*job_dir.glob("*.png"), *(job_dir / "figures").glob("*.png"))}
+
+
 def build_app(ctx: ConsoleContext) -> FastAPI:
     """The console's ASGI application."""
     @contextlib.asynccontextmanager
@@ -277,13 +282,12 @@ def build_app(ctx: ConsoleContext) -> FastAPI:
 
     @app.get("/api/jobs/{job_id}/figures", dependencies=read, summary="the job's figures")
     def figures(job_id: str) -> list[str]:
-        job = job_of(job_id)
-        return sorted(p.name for p in Path(job.dir).glob("*.png"))
+        return sorted(figure_files(Path(job_of(job_id).dir)))
 
     @app.get("/api/jobs/{job_id}/figures/{name}", dependencies=read, summary="one figure")
     def figure(job_id: str, name: str) -> FileResponse:
         job = job_of(job_id)
-        known = {p.name: p for p in Path(job.dir).glob("*.png")}
+        known = figure_files(Path(job.dir))
         if name not in known:  # only a name the listing gave, never a client's path
             raise ApiError(404, f"job {job.id} has no figure '{name}'; see its figure list")
         return FileResponse(known[name], media_type="image/png")

@@ -69,12 +69,20 @@ def test_after_an_abort_the_next_job_waits_and_nothing_moves_until_confirmed(
         end = time.monotonic() + 30
         while client.status(first.id).percent < 30 and time.monotonic() < end:
             time.sleep(0.02)
+        # paused (the nozzle stays where it stopped, in the gel), then aborted: the supervisor
+        # retracts it along its axis and parks it home (a printing job's abort does the same,
+        # tests/mesp_cell/web/test_api.py)
+        assert client.command("pause", first.id).ok
+        assert client.wait(first.id, timeout=20).state == "paused"
         reply = client.command("abort", first.id)
         assert reply.ok, reply.reason
-        aborted = client.wait(first.id, timeout=20)
-        assert aborted.state == "aborted"
-        assert aborted.reason == ("aborted by the operator; nozzle retracted along its axis "
-                                  "out of the gel and parked at home")
+        assert client.status(first.id).state == "aborted"
+        end = time.monotonic() + 20
+        while time.monotonic() < end and len(client.store.history(first.id)) < 9:
+            time.sleep(0.05)
+        note = client.store.history(first.id)[-1]
+        assert note[1:] == ("aborted", "aborted", "nozzle retracted along its axis out of the "
+                            "gel and parked at home"), note
         home = load_cell(None).robot.home_deg  # the robot node's home: the bundled cell's
         assert np.abs(np.subtract(states[-1].q, home)).max() < 0.05  # parked at home
         # the next job waits for the operator: nothing moves until the confirmation

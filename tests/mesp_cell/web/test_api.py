@@ -103,6 +103,14 @@ def test_bad_requests_answer_400_401_404_409_413_422(console: Console, ring: Pat
     assert console.job(job_id)["state"] == "aborted"
     r = console.post(f"/api/jobs/{job_id}/ready")
     assert r.status_code == 409 and "aborted" in r.json()["detail"]
+    # figures: only the names the job directory has, never a client's path
+    figures = console.home / "jobs" / job_id / "figures"
+    figures.mkdir()
+    (figures / "section.png").write_bytes(b"\x89PNG\r\n\x1a\n")
+    assert h.get(f"/api/jobs/{job_id}/figures").json() == ["section.png"]
+    r = h.get(f"/api/jobs/{job_id}/figures/section.png")
+    assert r.status_code == 200 and r.headers["content-type"] == "image/png"
+    assert h.get(f"/api/jobs/{job_id}/figures/..%2F..%2Fjobs.sqlite").status_code == 404
     stored = list((console.home / "jobs" / "uploads").glob("*/*"))
     assert [p.name for p in stored] == ["ring.stl"] and all(
         p.resolve().is_relative_to(console.home / "jobs") for p in stored)
