@@ -157,7 +157,8 @@ class JobStore:
         First a job that may print now (a resume requested, or the tank confirmed in
         ``ready_check``), else the oldest to slice or plan, or the oldest planned one to park
         in ``ready_check`` when no job waits there yet (one job waits for the operator at a
-        time, so a confirmation always names the job that will print).
+        time, so a confirmation always names the job that will print) and no paused or
+        interrupted job holds the tank (its part is still in the gel).
         """
         row = self._db.execute(
             f"SELECT {_COLUMNS} FROM jobs WHERE cell = ? AND ((resume = 1 AND state IN "
@@ -168,7 +169,8 @@ class JobStore:
             row = self._db.execute(
                 f"SELECT {_COLUMNS} FROM jobs WHERE cell = ? AND (state IN ('submitted',"
                 "'sliced') OR (state = 'planned' AND NOT EXISTS (SELECT 1 FROM jobs WHERE "
-                "cell = ? AND state = 'ready_check'))) ORDER BY created, id LIMIT 1",
+                "cell = ? AND state IN ('ready_check', 'paused', 'interrupted')))) "
+                "ORDER BY created, id LIMIT 1",
                 (cell, cell),
             ).fetchone()
         return JobRecord(*row) if row else None

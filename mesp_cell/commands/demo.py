@@ -149,7 +149,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _hold(cell: Any) -> None:
-    """Keep the cell (and its console) running until Ctrl-C or a critical failure."""
+    """Keep the cell (and its console) running until Ctrl-C (or SIGTERM) or a critical
+    failure."""
+    import signal
+
+    # installed explicitly: a process started in the background by a non-interactive shell
+    # inherits SIGINT ignored
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
     try:
         while not cell.failed:
             time.sleep(0.5)

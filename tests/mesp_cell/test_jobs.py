@@ -165,5 +165,14 @@ def test_a_fresh_print_waits_in_ready_check_until_confirmed(store: JobStore, mod
     store.confirm_ready(second.id)
     store.unconfirm_all("sim")  # a new session: the old confirmation does not count
     assert store.next_pending("sim") is None
+    store.transition(second.id, "printing")
+    store.transition(second.id, "paused")  # a paused job holds the tank: nothing else parks
+    third = store.submit(model, "sim", tmp_path / "jobs")
+    store.transition(third.id, "sliced")
+    store.transition(third.id, "planned")
+    assert store.next_pending("sim") is None
+    store.transition(second.id, "aborted")
+    nxt = store.next_pending("sim")
+    assert nxt is not None and nxt.id == third.id
     store.note(second.id, "a   note")
-    assert store.history(second.id)[-1][1:] == ("ready_check", "ready_check", "a note")
+    assert store.history(second.id)[-1][1:] == ("aborted", "aborted", "a note")
