@@ -11,97 +11,32 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import logging
-import threading
 import time
 from collections.abc import AsyncIterator, Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, Any
 
-from fastapi import Depends, FastAPI, File, Form, Request, UploadFile, WebSocket
+from fastapi import Depends, FastAPI, File, Form, Request, UploadFile
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
 from fastapi.staticfiles import StaticFiles
-from starlette.websockets import WebSocketDisconnect
 
-from mesp_cell.bus.session import Bus
 from mesp_cell.estop_check import confirm_estop
-from mesp_cell.jobs import FINAL, JobRecord, JobStore
+from mesp_cell.jobs import FINAL, JobRecord
 from mesp_cell.messages import Command, EStop
-from mesp_cell.web.live import LiveState
+from mesp_cell.web.context import ApiError, ConsoleContext, figure_files, job_json
 from mesp_cell.web.preview import toolpath_preview
+from mesp_cell.web.stream import add_live_route, broadcaster
 from mesp_cell.web.token import bearer_ok
 from mesp_cell.web.uploads import TooLarge, store_upload
 from slicer.errors import InputError
 
-log = logging.getLogger("mesp.console")
 STATIC = Path(__file__).resolve().parent / "static"
-LIVE_PERIOD_S = 0.2  # the stream's period without news (the supervisor publishes at 5 Hz)
-
-
-class ApiError(Exception):
-    """An answer other than 2xx, with its one-line reason."""
-
-    def __init__(self, status: int, detail: str) -> None:
-        super().__init__(detail)
-        self.status, self.detail = status, detail
-
-
-@dataclass
-class ConsoleContext:
-    """What the API serves from. ``token`` "" = none configured; ``token_all``: every call
-    needs it (the console is bound beyond loopback)."""
-
-    cell: str
-    home: Path
-    db_path: Path
-    bus: Bus
-    live: LiveState
-    token: str = ""
-    token_all: bool = False
-    max_upload: int = 64 << 20
-    clients: set[asyncio.Queue[dict[str, Any]]] = field(default_factory=set)
-    loop: asyncio.AbstractEventLoop | None = None  # the server's, once it runs
-    news: asyncio.Event | None = None  # set (thread-safe) when a progress message arrives
-    _local: threading.local = field(default_factory=threading.local)
-
-    @property
-    def store(self) -> JobStore:
-        """This thread's connection to the job store (one SQLite connection per thread: the
-        API's handlers run on a thread pool)."""
-        store = getattr(self._local, "store", None)
-        if store is None:
-            store = self._local.store = JobStore(self.db_path)
-        return store
-
-
-def job_json(job: JobRecord, history: list[tuple[float, str, str, str]] | None = None
-             ) -> dict[str, Any]:
-    """A job as the API shows it; with its ``history``, also the duration and result."""
-    out: dict[str, Any] = {
-        "id": job.id, "state": job.state, "reason": job.reason, "model": Path(job.model).name,
-        "created": job.created, "updated": job.updated, "layer": job.layer,
-        "layers": job.layers, "waypoint": job.waypoint, "waypoints": job.waypoints,
-        "percent": job.percent, "eta_s": job.eta_s if job.state == "printing" else None,
-        "ink_mm3": job.volume, "resume_pending": bool(job.resume),
-        "ready_confirmed": bool(job.ready), "final": job.state in FINAL}
-    if history is not None:
-        starts = [t for t, _, new, _ in history if new == "printing"]
-        out["started"] = starts[0] if starts else None
-        out["duration_s"] = (job.updated - starts[0]) if starts and job.state in FINAL else None
-        out["result"] = job.state if job.state in FINAL else None
-        out["history"] = [{"t": t, "from": a, "to": b, "reason": r} for t, a, b, r in history]
-    return out
-
-
-def figure_files(job_dir: Path) -> dict[str, Path]:
-    """The job's PNG figures by name (the job directory and its ``figures/``)."""
-    return {p.name: p for p in (*job_dir.glob("*.png"), *(job_dir / "figures").glob("*.png"))}
 
 
 def build_app(ctx: ConsoleContext) -> FastAPI:
     """The console's ASGI application."""
+
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI) -> AsyncIterator[None]:
         ctx.loop, ctx.news = asyncio.get_running_loop(), asyncio.Event()
@@ -292,71 +227,5 @@ def build_app(ctx: ConsoleContext) -> FastAPI:
             raise ApiError(404, f"job {job.id} has no figure '{name}'; see its figure list")
         return FileResponse(known[name], media_type="image/png")
 
-    # -- live stream -----------------------------------------------------------------------
-    @app.websocket("/api/live")
-    async def live(ws: WebSocket, token: str = "") -> None:
-        if ctx.token_all and not bearer_ok(ctx.token, f"Bearer {token}"):
-            await ws.close(code=4401, reason="bearer token required (?token=...)")
-            return
-        await ws.accept()
-        queue: asyncio.Queue[dict[str, Any]] = asyncio.Queue(maxsize=16)
-        ctx.clients.add(queue)
-        try:
-            await ws.send_json(jobs_message(ctx))
-            while True:
-                msg = await queue.get()
-                msg["sent_t"] = time.time()
-                await ws.send_json(msg)
-        except (WebSocketDisconnect, RuntimeError):
-            pass
-        finally:
-            ctx.clients.discard(queue)
-
+    add_live_route(app, ctx)
     return app
-
-
-def jobs_message(ctx: ConsoleContext) -> dict[str, Any]:
-    """The queue as streamed: every job of the cell, oldest first."""
-    return {"type": "jobs", "t": time.time(),
-            "jobs": [job_json(j) for j in ctx.store.query(ctx.cell)]}
-
-
-async def broadcaster(ctx: ConsoleContext, news: asyncio.Event) -> None:
-    """Send the live state to every WebSocket client every ``LIVE_PERIOD_S`` and at once when
-    a progress message arrives (``news``); the queue whenever a job changes."""
-    last_jobs = ""
-    last_poll = 0.0
-
-    def job_of(job_id: str) -> JobRecord | None:
-        try:
-            return ctx.store.get(job_id)
-        except InputError:
-            return None
-
-    while True:
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(news.wait(), LIVE_PERIOD_S)
-        news.clear()
-        if not ctx.clients:
-            continue
-        try:
-            msgs = [await asyncio.to_thread(ctx.live.snapshot, job_of)]
-            now = time.monotonic()
-            if now - last_poll >= 0.25:
-                last_poll = now
-                jobs = jobs_message(ctx)
-                key = repr([(j["id"], j["state"], j["reason"], j["ready_confirmed"],
-                             j["resume_pending"], j["layer"], int(j["percent"]))
-                            for j in jobs["jobs"]])
-                if key != last_jobs:
-                    last_jobs = key
-                    msgs.append(jobs)
-        except Exception:  # the stream must outlive a bad artifact or a busy store
-            log.exception("live stream")
-            continue
-        for q in list(ctx.clients):
-            for m in msgs:
-                if q.full():
-                    with contextlib.suppress(asyncio.QueueEmpty):
-                        q.get_nowait()  # a slow client gets the newest state, not a backlog
-                q.put_nowait(dict(m))

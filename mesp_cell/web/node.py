@@ -51,7 +51,8 @@ class ConsoleNode(LifecycleNode):
     def on_configure(self) -> None:
         import uvicorn
 
-        from mesp_cell.web.api import ConsoleContext, build_app
+        from mesp_cell.web.api import build_app
+        from mesp_cell.web.context import ConsoleContext
 
         p = self.params
         self.host = str(p.get("host", "127.0.0.1"))

@@ -8,7 +8,8 @@ from pathlib import Path
 
 from fastapi.testclient import TestClient
 
-from mesp_cell.web.api import ConsoleContext, build_app
+from mesp_cell.web.api import build_app
+from mesp_cell.web.context import ConsoleContext
 from mesp_cell.web.live import LiveState
 from mesp_cell.web.token import bearer_ok, is_loopback, load_token, token_path
 
