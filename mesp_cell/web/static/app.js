@@ -76,6 +76,9 @@ function onLive(msg) {
     $("cur-state").textContent = cur.state;
     $("bar-fill").style.width = cur.percent.toFixed(1) + "%";
     $("bar-text").textContent = `${cur.percent.toFixed(1)} % of the time`;
+    $("cur-layer").textContent = cur.layers ? `${cur.layer >= 0 ? cur.layer + 1 : "-"} / ${cur.layers}` : "-";
+    $("cur-ink").textContent = `${fmt(cur.ink_mm3, 0)} mm³`;
+    for (const id of ["cur-eta", "cur-finish", "cur-track", "cur-clear"]) $(id).textContent = "-";
     return;
   }
   if (!j) return;
@@ -118,6 +121,7 @@ function onJobs(jobs) {
       `<td>${j.layers ? `${j.layer + 1}/${j.layers} - ${j.percent.toFixed(1)} %` : "-"}</td><td>${act}</td></tr>`;
   }).join("") || `<tr><td colspan="4" class="muted">no jobs queued</td></tr>`;
   alerts(jobs);
+  if (state.live) onLive(state.live);  // the panel shows the store's state at once
   loadHistory();
   if (state.selected) loadEvents(state.selected);
   const sel = jobs.find((j) => j.id === state.selected);
@@ -216,7 +220,11 @@ function drawPreview() {
 }
 
 function markLayer(layer) {
-  $("cur-layer").title = `printing layer ${layer + 1}`;
+  // "follow the print": the preview shows the layers printed so far and the current one
+  const slider = $("pv-layer");
+  if (!$("pv-follow").checked || state.previewId !== currentJob() || Number(slider.value) === layer) return;
+  slider.value = Math.max(layer, 0);
+  drawPreview();
 }
 
 async function loadFigures(id) {
@@ -289,7 +297,7 @@ $("submit-form").onsubmit = async (ev) => {
     selectJob(job.id);
   } catch (e) { $("submit-msg").textContent = e.message; }
 };
-$("pv-layer").oninput = drawPreview;
+$("pv-layer").oninput = () => { $("pv-follow").checked = false; drawPreview(); };
 $("pv-colour").onchange = drawPreview;
 
 api("/api/cell").then((c) => { $("cell").textContent = c.cell; }).catch((e) => flash(e.message, "danger"));
