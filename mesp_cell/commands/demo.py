@@ -285,8 +285,10 @@ class _Printer:
 
     def progress(self, job: Any) -> None:
         text = f"  {job.state:<9} layer {job.layer + 1}/{job.layers}  {job.percent:5.1f}%"
-        if job.eta_s and job.eta_s > 0:
-            text += f"  ETA {job.eta_s:5.0f} s"
+        if job.state == "printing" and job.eta_s > 0:
+            from mesp_cell.commands.job import hmm
+
+            text += f"  ETA {hmm(job.eta_s)}"
         text += f"  {job.volume:8.0f} mm^3"
         now = time.monotonic()
         if job.state in ("printing", "done"):
