@@ -6,6 +6,7 @@ SIZE --no-baselines --out DIR``, ``mesp plan DIR``, ``mesp inspect DIR``. A step
 keeps its one-line reason (``mesp: error: ...``); the next steps are skipped. Usage:
 
     .venv/bin/python bench/real_models.py [--models teapot torus ...] [--size 40]
+                                          [--steps slice,plan,inspect] [--voxel 0.4]
                                           [--out bench/results/real_models] [--timeout 900]
                                           [--extra ARG ...]  (more ``mesp slice`` arguments)
 
@@ -98,31 +99,40 @@ def _metrics(report: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def run_model(model: CorpusModel, out: Path, size: float, timeout: float,
-              extra: list[str], previous: dict[str, Any] | None = None) -> dict[str, Any]:
-    """slice, plan, inspect one model; its statuses, reasons, timings and metrics. With
-    ``previous`` (this model's row of an earlier run whose slice is in ``out``), the slice is
-    kept and only plan and inspect run again."""
+STEPS = ("slice", "plan", "inspect")
+
+
+def run_model(model: CorpusModel, out: Path, size: float, timeout: float, extra: list[str],
+              steps: tuple[str, ...] = STEPS, voxel: float | None = None,
+              previous: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Run ``steps`` of slice, plan, inspect on one model; its statuses, reasons, timings and
+    metrics. A step not in ``steps`` keeps its result from ``previous`` (this model's row of
+    an earlier run into ``out``), so a planner change re-runs plan and inspect on the same
+    slices."""
     job = out / model.name
     row: dict[str, Any] = {"model": model.name, "origin": model.origin}
-    steps = [
-        ("slice", ["slice", str(model.path), "--scale-to", str(size), "--no-baselines",
-                   "--quiet", "--out", str(job), *extra]),
-        ("plan", ["plan", str(job), "--quiet"]),
-        ("inspect", ["inspect", str(job), "--quiet", "--no-figures"]),
-    ]
-    if previous is not None:
-        row["slice"] = previous["slice"]
-        steps = steps[1:] if previous["slice"]["status"] == "ok" else []
-        print(f"  {model.name:18s} slice    kept from the previous run", flush=True)
-    for name, args in steps:
-        status, reason, seconds, mem = _run(args, timeout)
-        row[name] = {"status": status, "reason": reason, "s": round(seconds, 1),
-                     "peak_mb": round(mem)}
-        print(f"  {model.name:18s} {name:8s} {status:8s} {seconds:7.1f} s  {reason[:110]}",
-              flush=True)
-        if status != "ok" and not (name == "plan" and status == "exit 3"):
-            break  # exit 3: a plan the cell cannot execute, still written for inspection
+    commands = {
+        "slice": ["slice", str(model.path), "--scale-to", str(size), "--no-baselines",
+                  "--quiet", "--out", str(job), *extra],
+        "plan": ["plan", str(job), "--quiet"],
+        "inspect": ["inspect", str(job), "--quiet", "--no-figures",
+                    *(["--voxel", str(voxel)] if voxel else [])],
+    }
+    for name in STEPS:
+        if name not in steps:
+            if previous is not None and name in previous:
+                row[name] = previous[name]
+        else:
+            status, reason, seconds, mem = _run(commands[name], timeout)
+            row[name] = {"status": status, "reason": reason, "s": round(seconds, 1),
+                         "peak_mb": round(mem)}
+            print(f"  {model.name:18s} {name:8s} {status:8s} {seconds:7.1f} s  {reason[:110]}",
+                  flush=True)
+        done = row.get(name)
+        # exit 3: a plan the cell cannot execute, still written for inspection
+        if done is None or (done["status"] != "ok"
+                            and not (name == "plan" and done["status"] == "exit 3")):
+            break
     report_path = job / "report.json"
     report = json.loads(report_path.read_text()) if report_path.is_file() else {}
     row["metrics"] = _metrics(report)
@@ -171,8 +181,10 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--models", nargs="*", help="model names (file stems); default: all")
     ap.add_argument("--size", type=float, default=40.0, help="largest extent, mm")
-    ap.add_argument("--reuse", action="store_true",
-                    help="keep the slices of the previous run in OUT; plan and inspect again")
+    ap.add_argument("--steps", default=",".join(STEPS),
+                    help="which of slice,plan,inspect to run; the others keep the previous "
+                         "run's results in OUT (e.g. plan,inspect after a planner change)")
+    ap.add_argument("--voxel", type=float, default=0.4, help="mesp inspect --voxel, mm")
     ap.add_argument("--out", type=Path, default=ROOT / "bench" / "results" / "real_models")
     ap.add_argument("--timeout", type=float, default=900.0, help="per step, s")
     ap.add_argument("--shared", type=Path, default=SHARED_MODELS,
@@ -180,17 +192,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--extra", nargs=argparse.REMAINDER, default=[],
                     help="more mesp slice arguments (the rest of the line)")
     args = ap.parse_args(argv)
+    steps = tuple(s.strip() for s in args.steps.split(",") if s.strip())
+    if not steps or any(s not in STEPS for s in steps):
+        ap.error(f"--steps takes names from {','.join(STEPS)}")
     corpus = shared_models(args.shared) + generated_models(args.out / "generated")
     if args.models:
         corpus = [m for m in corpus if m.name in set(args.models)]
-    before: dict[str, Any] = {}
-    if args.reuse and (args.out / "results.json").is_file():
-        before = {r["model"]: r for r in json.loads((args.out / "results.json").read_text())}
-    rows = [run_model(m, args.out, args.size, args.timeout, args.extra, before.get(m.name))
-            for m in corpus]
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "results.json").write_text(json.dumps(rows, indent=1))
-    text = table(rows)
+    results = args.out / "results.json"
+    rows: dict[str, Any] = {}
+    if results.is_file():
+        rows = {r["model"]: r for r in json.loads(results.read_text())}
+    for m in corpus:  # results.json after each model, so a stopped run keeps what it did
+        rows[m.name] = run_model(m, args.out, args.size, args.timeout, args.extra, steps,
+                                 args.voxel, rows.get(m.name))
+        results.write_text(json.dumps(list(rows.values()), indent=1))
+    text = table(list(rows.values()))
     (args.out / "table.md").write_text(text + "\n")
     print(text)
     return 0

@@ -1,7 +1,8 @@
 """The `mesp` console: one sub-command per module in ``mesp_cell.commands``.
 
-A user's mistake (``InputError``) prints one line ``mesp: error: ...`` and exits 2; an
-interrupted command exits 130; nothing else is swallowed.
+A user's mistake (``InputError``, a malformed option, a file the system will not let us read
+or write) prints one line ``mesp: error: <problem>; <fix>`` and exits 2; an interrupted
+command exits 130; nothing else is swallowed.
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import argparse
 import importlib
 import pkgutil
 import sys
+import typing
 from collections.abc import Sequence
 
 from slicer.errors import InputError
@@ -22,9 +24,18 @@ def command_modules() -> list[str]:
     return sorted(m.name for m in pkgutil.iter_modules(package.__path__) if not m.ispkg)
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose errors are one ``mesp: error: ...; <fix>`` line (exit 2)."""
+
+    def error(self, message: str) -> typing.NoReturn:
+        text = " ".join(message.split())
+        print(f"mesp: error: {text}; see `{self.prog} --help`", file=sys.stderr)
+        sys.exit(2)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser, with every registered sub-command."""
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="mesp",
         description="MESP Cell: multi-axis embedded silicone printing with a UR5e.",
     )
@@ -44,6 +55,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         code = args.func(args)
     except InputError as exc:
         print(f"mesp: error: {exc.one_line()}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # a path the system refuses: permissions, a full disk, a device
+        where = f" ({exc.filename})" if exc.filename else ""
+        print(f"mesp: error: {exc.strerror or exc}{where}; check the path, its permissions "
+              "and the free space", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("mesp: interrupted", file=sys.stderr)

@@ -184,19 +184,20 @@ class JobStore:
 
     # -- changes ---------------------------------------------------------------------------
     def submit(self, model: Path, cell: str, root: Path, job_file: Path | None = None,
-               cell_file: Path | None = None, job_id: str | None = None) -> JobRecord:
-        """Record a new job; its directory is ``root/<id>``. Inputs are checked by the caller."""
-        stem = re.sub(r"[^a-z0-9]+", "-", Path(model).stem.lower()).strip("-") or "job"
+               cell_file: Path | None = None) -> JobRecord:
+        """Record a new job; its directory is ``root/<id>``. Inputs are checked by the caller.
+
+        The id is made here, never taken from a caller: the model's name reduced to
+        ``[a-z0-9-]`` (at most 40 characters) and a number, so the directory stays in ``root``.
+        """
+        stem = re.sub(r"[^a-z0-9]+", "-", Path(model).stem.lower()).strip("-")[:40] or "job"
         now = time.time()
         with self._tx() as db:
-            if job_id is None:
-                n = db.execute("SELECT COUNT(*) FROM jobs").fetchone()[0] + 1
+            n = db.execute("SELECT COUNT(*) FROM jobs").fetchone()[0] + 1
+            job_id = f"{stem}-{n:04d}"
+            while db.execute("SELECT 1 FROM jobs WHERE id = ?", (job_id,)).fetchone():
+                n += 1
                 job_id = f"{stem}-{n:04d}"
-                while db.execute("SELECT 1 FROM jobs WHERE id = ?", (job_id,)).fetchone():
-                    n += 1
-                    job_id = f"{stem}-{n:04d}"
-            elif db.execute("SELECT 1 FROM jobs WHERE id = ?", (job_id,)).fetchone():
-                raise InputError(f"job '{job_id}' already exists", "choose another id")
             job_dir = Path(root) / job_id
             db.execute(
                 "INSERT INTO jobs (id, cell, state, model, job_file, cell_file, dir, created, "
@@ -309,25 +310,35 @@ class JobStore:
                        "WHERE id = ?", (percent, eta_s, volume, time.time(), job_id))
 
 
-MODEL_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf", ".msh", ".vtk", ".vtu", ".mesh")
-
-
 def check_submission(model: Path, job_file: Path | None = None,
                      cell_file: Path | None = None) -> None:
     """Refuse a job before anything is queued or moves: a one-line ``InputError`` each for a
-    missing/unsupported model, a malformed job file, or a malformed cell file."""
+    missing model, one the slicer cannot read (its type, or its content: the model is loaded
+    and checked as ``mesp slice`` would), a symbolic link leaving its folder, a malformed job
+    file, or a malformed cell file."""
+    from slicer.config import load_job
+    from slicer.mesh_io import SURFACE_SUFFIXES, TET_SUFFIXES, load_surface, load_tet_mesh
+
     model = Path(model)
+    suffixes = SURFACE_SUFFIXES + TET_SUFFIXES
     if not model.is_file():
         raise InputError(f"model {model} does not exist", "check the path")
-    if model.suffix.lower() not in MODEL_SUFFIXES:
+    if model.is_symlink():
+        target = model.resolve()
+        if target.parent != model.absolute().parent.resolve() or target.suffix.lower() != \
+                model.suffix.lower():
+            raise InputError(f"model {model} is a link to {target}, outside its folder",
+                             "copy the model file itself into the folder you submit from")
+    if model.suffix.lower() not in suffixes:
         raise InputError(f"model {model} has an unsupported type '{model.suffix}'",
-                         f"use one of {', '.join(MODEL_SUFFIXES)}")
+                         f"export it as one of {', '.join(suffixes)}")
     if model.stat().st_size == 0:
         raise InputError(f"model {model} is empty", "export it again")
-    if job_file is not None:
-        from slicer.config import load_job
-
-        load_job(Path(job_file))
+    job = load_job(Path(job_file) if job_file is not None else None)
+    if model.suffix.lower() in TET_SUFFIXES:
+        load_tet_mesh(model, job.model)
+    else:
+        load_surface(model, job.model)
     if cell_file is not None:
         from planner.cell import load_cell
 

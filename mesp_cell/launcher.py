@@ -100,23 +100,36 @@ def _subst(value: Any, env: Mapping[str, Any]) -> Any:
 
 
 def load_launch(path: Path, overrides: Mapping[str, Any] | None = None) -> LaunchSpec:
-    """Read a launch file; ``overrides`` replace its ``[vars]``. Bad content is an InputError."""
+    """Read a launch file; ``overrides`` replace its ``[vars]``. Bad content is an InputError
+    naming the key (``mesp_cell.launch_schema``), before anything starts."""
+    from mesp_cell import launch_schema as check
+
     data = read_toml(Path(path))
     unknown = set(data) - {"cell", "bus", "vars", "process"}
     if unknown:
         raise InputError(f"{path}: unknown section [{sorted(unknown)[0]}]",
                          "allowed: [cell], [bus], [vars], [[process]]")
     env: dict[str, Any] = {"home": str(mesp_home()), "python": sys.executable}
-    for k, v in {**data.get("vars", {}), **(overrides or {})}.items():
+    variables = check.table(data.get("vars", {}), f"{path}: [vars]")
+    for k, v in {**variables, **(overrides or {})}.items():
         env[k] = free_port() if v == "auto" else v
-    env["cell"] = cell = str(data.get("cell", {}).get("name", "sim"))
-    bus = data.get("bus", {})
-    hub = str(bus.get("hub", "tcp/127.0.0.1:auto"))
+    cell_table = check.table(data.get("cell", {}), f"{path}: [cell]")
+    env["cell"] = cell = check.string(cell_table.get("name", "sim"), f"{path}: cell.name")
+    if not re.match(r"^[a-z0-9][a-z0-9_\-]*$", cell):
+        raise InputError(f"{path}: cell name '{cell}' is not a valid bus name",
+                         "use lower-case letters, digits, '_' or '-'")
+    bus = check.table(data.get("bus", {}), f"{path}: [bus]")
+    hub = check.endpoint(bus.get("hub", "tcp/127.0.0.1:auto"), f"{path}: bus.hub", auto=True)
     if hub.endswith(":auto"):
         hub = hub[: -len("auto")] + str(free_port())
     env["hub"] = hub
+    connect = check.endpoints(bus.get("connect", []), f"{path}: bus.connect")
+    raw_procs = data.get("process", [])
+    if not isinstance(raw_procs, list):
+        raise InputError(f"{path}: process must be [[process]] tables", "see launch/sim.toml")
     procs = []
-    for i, raw in enumerate(data.get("process", [])):
+    for i, raw in enumerate(raw_procs):
+        raw = check.table(raw, f"{path}: process #{i + 1}")
         if "name" not in raw or "module" not in raw:
             raise InputError(f"{path}: process #{i + 1} needs 'name' and 'module'",
                              "see launch/sim.toml")
@@ -125,15 +138,24 @@ def load_launch(path: Path, overrides: Mapping[str, Any] | None = None) -> Launc
         if extra:
             raise InputError(f"{path}: process '{raw['name']}' has unknown key "
                              f"'{sorted(extra)[0]}'", "see launch/sim.toml")
+        where = f"{path}: process '{raw['name']}'"
+        params = raw.get("params")
         procs.append(ProcessSpec(
-            name=raw["name"], module=raw["module"], params=raw.get("params"),
-            args=tuple(str(a) for a in raw.get("args", ())), restart=raw.get("restart", "never"),
-            critical=bool(raw.get("critical", True)), ready=raw.get("ready", ""),
-            max_restarts=int(raw.get("max_restarts", 3)),
-            heartbeat_timeout=float(raw.get("heartbeat_timeout", 5.0))))
+            name=check.string(raw["name"], f"{where} name"),
+            module=check.module(raw["module"], f"{where} module"),
+            params=None if params is None else check.table(params, f"{where} params"),
+            args=check.arguments(raw.get("args", []), f"{where} args"),
+            restart=check.string(raw.get("restart", "never"), f"{where} restart"),
+            critical=check.flag(raw.get("critical", True), f"{where} critical"),
+            ready=check.string(raw.get("ready", ""), f"{where} ready"),
+            max_restarts=int(check.number(raw.get("max_restarts", 3), f"{where} max_restarts",
+                                          check.MAX_RESTARTS, whole=True)),
+            heartbeat_timeout=float(check.number(raw.get("heartbeat_timeout", 5.0),
+                                                 f"{where} heartbeat_timeout",
+                                                 check.HEARTBEAT_TIMEOUT_S))))
     if not procs:
         raise InputError(f"{path} declares no [[process]]", "see launch/sim.toml")
-    return LaunchSpec(cell, hub, tuple(bus.get("connect", ())), tuple(procs), env)
+    return LaunchSpec(cell, hub, connect, tuple(procs), env)
 
 
 @dataclass
@@ -198,7 +220,11 @@ class Launch:
         ``stop``; a critical failure is then left in ``failed``.
         """
         self.log_dir.mkdir(parents=True, exist_ok=True)
-        self.bus = Bus(self.bus_config, "launcher")
+        try:
+            self.bus = Bus(self.bus_config, "launcher")
+        except Exception as exc:  # zenoh: the port is taken, the address is not this host's
+            raise LaunchFailed(f"cannot open the bus hub {self.spec.hub} ({exc})",
+                               "choose a free port in [bus] hub, or write auto") from exc
         self.bus.watch_presence(self._on_presence)
         self.bus.subscribe("*", "heartbeat", Heartbeat, self._on_heartbeat)
         self.run_file.parent.mkdir(parents=True, exist_ok=True)
@@ -451,7 +477,11 @@ class CellClient:
             if self._bus_config is None:
                 raise InputError(f"cell '{self.cell}' is not running",
                                  "start it with `mesp launch launch/sim.toml`")
-            self._bus = Bus(self._bus_config, f"console-{os.getpid()}")
+            try:
+                self._bus = Bus(self._bus_config, f"console-{os.getpid()}")
+            except Exception as exc:  # zenoh: the hub's address cannot be reached
+                raise InputError(f"cannot reach cell '{self.cell}' on the bus ({exc})",
+                                 "check that `mesp launch` is running for this cell") from exc
             time.sleep(0.3)  # let the peers mesh before the first query
         return self._bus
 

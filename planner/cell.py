@@ -15,7 +15,13 @@ from typing import Literal
 
 import numpy as np
 
-from slicer.configtools import build, merge, read_toml
+from slicer.alpha_range import AlphaRange
+from slicer.configtools import build, merge, read_ranges, read_toml
+from slicer.errors import InputError
+from slicer.toml_defaults import table
+
+# every field default below comes from the bundled cell, the one defaults file of a cell
+_CELL = table("planner", "cells/default.toml")
 
 Vec3 = tuple[float, float, float]
 
@@ -50,14 +56,14 @@ def pose(xyz_mm: tuple[float, ...], rpy_deg: tuple[float, ...] = (0.0, 0.0, 0.0)
 class RobotConfig:
     """The UR5e: base pose in the cell, home pose and joint limits (deg, deg/s, deg/s^2)."""
 
-    base_xyz_mm: Vec3 = (0.0, 0.0, 0.0)
-    base_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
-    home_deg: tuple[float, ...] = (161.94, -81.17, 29.63, -38.45, -90.0, -18.06)
-    joint_min_deg: tuple[float, ...] = (-360.0,) * 6
-    joint_max_deg: tuple[float, ...] = (360.0,) * 6
-    max_velocity_deg_s: tuple[float, ...] = (180.0,) * 6
-    max_acceleration_deg_s2: tuple[float, ...] = (400.0,) * 6
-    link_radius_mm: tuple[float, ...] = (60.0, 55.0, 45.0, 42.0, 42.0, 38.0)
+    base_xyz_mm: Vec3 = _CELL["robot"]["base_xyz_mm"]
+    base_rpy_deg: Vec3 = _CELL["robot"]["base_rpy_deg"]
+    home_deg: tuple[float, ...] = _CELL["robot"]["home_deg"]
+    joint_min_deg: tuple[float, ...] = _CELL["robot"]["joint_min_deg"]
+    joint_max_deg: tuple[float, ...] = _CELL["robot"]["joint_max_deg"]
+    max_velocity_deg_s: tuple[float, ...] = _CELL["robot"]["max_velocity_deg_s"]
+    max_acceleration_deg_s2: tuple[float, ...] = _CELL["robot"]["max_acceleration_deg_s2"]
+    link_radius_mm: tuple[float, ...] = _CELL["robot"]["link_radius_mm"]
 
     def __post_init__(self) -> None:
         _vec(self.base_xyz_mm, 3, "base_xyz_mm")
@@ -110,11 +116,12 @@ class ToolPart:
 class ToolConfig:
     """Flange-to-nozzle-tip transform, the nozzle shaft and the holder/extruder parts."""
 
-    tip_xyz_mm: Vec3 = (0.0, 0.0, 460.0)
-    tip_rpy_deg: Vec3 = (0.0, 0.0, 0.0)
-    nozzle_length_mm: float = 300.0
-    nozzle_diameter_mm: float = 2.0
-    parts: tuple[ToolPart, ...] = ()
+    tip_xyz_mm: Vec3 = _CELL["tool"]["tip_xyz_mm"]
+    tip_rpy_deg: Vec3 = _CELL["tool"]["tip_rpy_deg"]
+    nozzle_length_mm: float = _CELL["tool"]["nozzle_length_mm"]
+    nozzle_diameter_mm: float = _CELL["tool"]["nozzle_diameter_mm"]
+    parts: tuple[ToolPart, ...] = field(default_factory=lambda: tuple(
+        ToolPart(**part) for part in _CELL["tool"]["parts"]))
 
     def __post_init__(self) -> None:
         _vec(self.tip_xyz_mm, 3, "tip_xyz_mm")
@@ -134,8 +141,8 @@ class ToolConfig:
 class TableConfig:
     """The table the robot and the tank stand on: an axis-aligned box in the cell frame."""
 
-    center_mm: Vec3 = (250.0, 0.0, -20.0)
-    size_mm: Vec3 = (1200.0, 900.0, 40.0)
+    center_mm: Vec3 = _CELL["table"]["center_mm"]
+    size_mm: Vec3 = _CELL["table"]["size_mm"]
 
     def __post_init__(self) -> None:
         _vec(self.center_mm, 3, "center_mm")
@@ -153,13 +160,13 @@ class TankConfig:
     far above the gel), see ``planner.placement.fit_gel``.
     """
 
-    floor_center_mm: Vec3 = (480.0, 0.0, 8.0)
-    yaw_deg: float = 0.0
-    inner_size_mm: Vec3 = (500.0, 500.0, 260.0)
-    wall_mm: float = 8.0
-    gel_fill_mm: float = 240.0
-    fit_gel: bool = True
-    gel_cover_mm: float = 15.0
+    floor_center_mm: Vec3 = _CELL["tank"]["floor_center_mm"]
+    yaw_deg: float = _CELL["tank"]["yaw_deg"]
+    inner_size_mm: Vec3 = _CELL["tank"]["inner_size_mm"]
+    wall_mm: float = _CELL["tank"]["wall_mm"]
+    gel_fill_mm: float = _CELL["tank"]["gel_fill_mm"]
+    fit_gel: bool = _CELL["tank"]["fit_gel"]
+    gel_cover_mm: float = _CELL["tank"]["gel_cover_mm"]
 
     def __post_init__(self) -> None:
         _vec(self.floor_center_mm, 3, "floor_center_mm")
@@ -181,12 +188,12 @@ class TankConfig:
 class PlacementConfig:
     """Where the model frame sits in the tank, and whether to search for a better place."""
 
-    offset_mm: Vec3 = (0.0, 0.0, 10.0)
-    yaw_deg: float = 0.0
-    search: bool = True
-    search_step_mm: float = 20.0
-    search_yaw_step_deg: float = 30.0
-    wall_margin_mm: float = 10.0
+    offset_mm: Vec3 = _CELL["placement"]["offset_mm"]
+    yaw_deg: float = _CELL["placement"]["yaw_deg"]
+    search: bool = _CELL["placement"]["search"]
+    search_step_mm: float = _CELL["placement"]["search_step_mm"]
+    search_yaw_step_deg: float = _CELL["placement"]["search_yaw_step_deg"]
+    wall_margin_mm: float = _CELL["placement"]["wall_margin_mm"]
 
     def __post_init__(self) -> None:
         _vec(self.offset_mm, 3, "offset_mm")
@@ -200,26 +207,29 @@ class PlacementConfig:
 class PlanningConfig:
     """Orientation, clearance and timing settings of the planner."""
 
-    alpha_min_deg: float = 70.0
-    alpha_max_deg: float = 110.0
-    lean_max_deg: float = 30.0
-    upright_max_deg: float = 20.0
-    smooth_waypoints: int = 2
-    smooth_max_deg: float = 8.0
-    clearance_mm: float = 3.0
-    joint_margin_deg: float = 5.0
-    singular_margin: float = 0.05
-    damping: float = 0.01
-    spin_steps: int = 24
-    max_step_mm: float = 2.0
-    travel_speed_mm_s: float = 40.0
-    transfer_speed_mm_s: float = 250.0
-    approach_above_gel_mm: float = 30.0
-    extrusion_rate_mm3_s: float = 6.57
+    alpha_min_deg: float = _CELL["planning"]["alpha_min_deg"]
+    alpha_max_deg: float = _CELL["planning"]["alpha_max_deg"]
+    lean_max_deg: float = _CELL["planning"]["lean_max_deg"]
+    upright_max_deg: float = _CELL["planning"]["upright_max_deg"]
+    smooth_waypoints: int = _CELL["planning"]["smooth_waypoints"]
+    smooth_max_deg: float = _CELL["planning"]["smooth_max_deg"]
+    clearance_mm: float = _CELL["planning"]["clearance_mm"]
+    joint_margin_deg: float = _CELL["planning"]["joint_margin_deg"]
+    singular_margin: float = _CELL["planning"]["singular_margin"]
+    damping: float = _CELL["planning"]["damping"]
+    spin_steps: int = _CELL["planning"]["spin_steps"]
+    max_step_mm: float = _CELL["planning"]["max_step_mm"]
+    travel_speed_mm_s: float = _CELL["planning"]["travel_speed_mm_s"]
+    transfer_speed_mm_s: float = _CELL["planning"]["transfer_speed_mm_s"]
+    approach_above_gel_mm: float = _CELL["planning"]["approach_above_gel_mm"]
+
+    @property
+    def alpha_range(self) -> AlphaRange:
+        """The printing-angle range, as the slicer's step limits take it."""
+        return AlphaRange(self.alpha_min_deg, self.alpha_max_deg)
 
     def __post_init__(self) -> None:
-        if not 0 <= self.alpha_min_deg <= 90 <= self.alpha_max_deg <= 180:
-            raise ValueError("need 0 <= alpha_min_deg <= 90 <= alpha_max_deg <= 180")
+        AlphaRange(self.alpha_min_deg, self.alpha_max_deg)  # validates the range
         if not 0 <= self.lean_max_deg <= 60:
             raise ValueError("lean_max_deg must lie in [0, 60]")
         if not 0 <= self.upright_max_deg <= 45:
@@ -236,8 +246,6 @@ class PlanningConfig:
             raise ValueError("max_step_mm and travel_speed_mm_s must be positive")
         if self.approach_above_gel_mm <= 0 or self.transfer_speed_mm_s <= 0:
             raise ValueError("approach_above_gel_mm and transfer_speed_mm_s must be positive")
-        if self.extrusion_rate_mm3_s <= 0:
-            raise ValueError("extrusion_rate_mm3_s must be positive")
 
 
 @dataclass(frozen=True)
@@ -274,6 +282,12 @@ def load_cell(path: Path | None = None) -> CellConfig:
     data = default_cell_data()
     if path is not None:
         user = read_toml(Path(path))
+        if "extrusion_rate_mm3_s" in user.get("planning", {}):
+            raise InputError(f"{path}: [planning] extrusion_rate_mm3_s is no cell setting: C "
+                             "belongs to the extrusion profile the job is sliced with",
+                             "delete the line; set C with `mesp calibrate extrusion`")
         # a user's tool.parts list replaces the default list as a whole (merge is per key)
         data = merge(data, user)
-    return build(CellConfig, data, "cell")
+    ranges = read_ranges(resources.files("planner").joinpath("cell_ranges.toml").read_text(),
+                         "planner/cell_ranges.toml")
+    return build(CellConfig, data, "cell", ranges, "planner/cell_ranges.toml")

@@ -638,8 +638,10 @@ def _report(
     # the mean of its ends' speeds
     target_step = 0.5 * (samples.speed[:-1] + samples.speed[1:])
     ratio = v_step[ex_step] / np.maximum(target_step[ex_step], 1e-12)
-    # over-deposition: constant extrusion C for longer than the toolpath speed asks
-    C = cell.planning.extrusion_rate_mm3_s
+    # over-deposition: constant extrusion C for longer than the toolpath speed asks; C is the
+    # job's (its profile's, through eq. 4: W H v = C at every extruding waypoint)
+    C = float(np.median((toolpath.width * toolpath.height * toolpath.speed)[toolpath.extrude])
+              ) if toolpath.extrude.any() else 0.0
     planned = step[ex_step] / np.maximum(target_step[ex_step], 1e-12)
     extra = np.maximum(dt[ex_step] - planned, 0.0) * C
     slowed = ratio < 0.95

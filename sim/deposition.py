@@ -61,6 +61,7 @@ from numpy.typing import NDArray
 from sim import deposition_kernels as kernels
 from sim.voxels import MAX_VOXELS, VoxelGrid
 from slicer.errors import InputError
+from slicer.extrusion import factory_rate
 from slicer.progress import NullProgress, Progress
 from slicer.stages import Toolpath
 from slicer.tolerance import tol
@@ -95,7 +96,7 @@ class EllipseMorphology:
         aspect: float, h_f / w_f.
     """
 
-    rate_mm3_s: float = 6.57
+    rate_mm3_s: float = field(default_factory=factory_rate)  # the factory profile's C
     beta: float = 0.5
     aspect: float = 1.0
 

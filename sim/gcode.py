@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
 
@@ -28,7 +28,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slicer.errors import InputError
-from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
+from slicer.extrusion import factory_rate
+from slicer.stages import MAX_COORDINATE_MM, PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
+
+MAX_GCODE_BYTES = 256 << 20  # a G-code file larger than this is refused before it is read
 
 _WORD = re.compile(r"([A-Za-z])\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)")
 _CONTOUR_TYPES = ("WALL", "PERIMETER", "SKIRT", "BRIM", "EXTERNAL", "OVERHANG")
@@ -46,7 +49,7 @@ class GcodeOptions:
     """
 
     filament_diameter_mm: float = 1.75
-    rate_mm3_s: float = 6.57
+    rate_mm3_s: float = field(default_factory=factory_rate)  # the factory profile's C
     speed: Literal["volume", "feedrate"] = "volume"
     arc_step_mm: float = 0.5
 
@@ -67,6 +70,9 @@ def read_gcode(path: Path, options: GcodeOptions | None = None) -> Toolpath:
     path = Path(path)
     if not path.is_file():
         raise InputError(f"G-code file {path} does not exist", "check the --gcode path")
+    if path.stat().st_size > MAX_GCODE_BYTES:
+        raise InputError(f"G-code file {path} is larger than {MAX_GCODE_BYTES >> 20} MiB",
+                         "give the G-code of one part")
     try:
         text = path.read_text(errors="replace")
     except OSError as exc:
@@ -89,7 +95,7 @@ def parse_gcode(text: str, options: GcodeOptions | None = None,
     last_motion: float | None = None
     # One row per extruding move: start xyz, end xyz, volume, feed, pattern.
     rows: list[tuple[float, float, float, float, float, float, float, float, int]] = []
-    for raw in text.splitlines():
+    for number, raw in enumerate(text.splitlines(), start=1):
         line = raw.split(";", 1)
         comment = line[1].strip() if len(line) > 1 else ""
         if comment.upper().startswith("TYPE:"):
@@ -99,6 +105,13 @@ def parse_gcode(text: str, options: GcodeOptions | None = None,
         if not code:
             continue
         tokens = [(k.upper(), float(v)) for k, v in _WORD.findall(code)]
+        for k, v in tokens:
+            if k in "XYZIJ" and not abs(v) * unit <= MAX_COORDINATE_MM:
+                raise InputError(f"{source} line {number}: {k}{v:g} lies beyond "
+                                 f"{MAX_COORDINATE_MM:g} mm", "export the G-code again in mm")
+            if not math.isfinite(v):
+                raise InputError(f"{source} line {number}: {k} is not a finite number",
+                                 "export the G-code again")
         gs = [v for k, v in tokens if k == "G"]
         words = {k: v for k, v in tokens if k != "G"}
         for g in gs:
@@ -149,7 +162,15 @@ def parse_gcode(text: str, options: GcodeOptions | None = None,
                 abs_e = False
     if not rows:
         raise InputError(f"{source} has no extruding move", "export G-code with E values")
-    return _to_toolpath(np.array(rows, dtype=np.float64), opt)
+    with np.errstate(all="ignore"):  # a degenerate move shows in the check below
+        toolpath = _to_toolpath(np.array(rows, dtype=np.float64), opt)
+    values = np.concatenate([toolpath.height, toolpath.width, toolpath.speed])
+    problem = ("a move has a NaN or infinite height, width or speed"
+               if not np.all(np.isfinite(values)) else toolpath.check())
+    if problem:
+        raise InputError(f"{source}: {problem}",
+                         "export the G-code again with the extrusion (E) and feed (F) it prints")
+    return toolpath
 
 
 def _arc(start: NDArray[np.float64], end: NDArray[np.float64], i: float, j: float,

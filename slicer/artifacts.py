@@ -15,6 +15,9 @@ import numpy.typing as npt
 
 from slicer.errors import InputError
 
+# Mode of the files a job writes: readable by the lab like any output (mkstemp makes 0600).
+FILE_MODE = 0o644
+
 # (name -> (ndim, dtype kind, trailing shape or None)) used to validate a loaded file.
 Schema = Mapping[str, tuple[int, str, tuple[int, ...] | None]]
 
@@ -25,6 +28,7 @@ def atomic_write_bytes(path: Path, data: bytes) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
+        os.fchmod(fd, FILE_MODE)
         with os.fdopen(fd, "wb") as handle:
             handle.write(data)
             handle.flush()
@@ -40,6 +44,7 @@ def save_npz(path: Path, arrays: Mapping[str, npt.ArrayLike]) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    os.fchmod(fd, FILE_MODE)
     os.close(fd)
     try:
         with open(tmp, "wb") as handle:

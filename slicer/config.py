@@ -10,8 +10,12 @@ from typing import Any, Literal
 
 import numpy as np
 
-from slicer.configtools import build, merge, read_toml
+from slicer.configtools import build, merge, read_ranges, read_toml
 from slicer.errors import InputError
+from slicer.toml_defaults import table
+
+# every field default below comes from the one defaults file
+_JOB = table("slicer", "defaults.toml")
 
 UNIT_SCALE_MM = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
 
@@ -94,10 +98,10 @@ class CriticalSelector:
 
 @dataclass(frozen=True)
 class ModelConfig:
-    units: Literal["mm", "cm", "m", "in"] = "mm"
-    max_size_mm: float = 2000.0
-    min_size_mm: float = 1.0
-    scale_to_mm: float = 0.0
+    units: Literal["mm", "cm", "m", "in"] = _JOB["model"]["units"]
+    max_size_mm: float = _JOB["model"]["max_size_mm"]
+    min_size_mm: float = _JOB["model"]["min_size_mm"]
+    scale_to_mm: float = _JOB["model"]["scale_to_mm"]
 
     def __post_init__(self) -> None:
         if not 0 < self.min_size_mm < self.max_size_mm:
@@ -117,12 +121,12 @@ MAX_REFINE = 3  # red refinements after fTetWild (each multiplies the tets by 8)
 
 @dataclass(frozen=True)
 class MeshConfig:
-    edge_length_mm: float = 1.2
-    epsilon: float = 2e-3
-    stop_energy: float = 20.0
-    optimize_iterations: int = 10
-    coarsen: bool = False
-    refine: int | Literal["auto"] = "auto"
+    edge_length_mm: float = _JOB["mesh"]["edge_length_mm"]
+    epsilon: float = _JOB["mesh"]["epsilon"]
+    stop_energy: float = _JOB["mesh"]["stop_energy"]
+    optimize_iterations: int = _JOB["mesh"]["optimize_iterations"]
+    coarsen: bool = _JOB["mesh"]["coarsen"]
+    refine: int | Literal["auto"] = _JOB["mesh"]["refine"]
 
     def __post_init__(self) -> None:
         if self.refine != "auto" and self.refine not in range(MAX_REFINE + 1):
@@ -139,12 +143,12 @@ class MeshConfig:
 
 @dataclass(frozen=True)
 class SlicingConfig:
-    layer_height_mm: float = 0.6
-    critical: tuple[str, ...] = ("bottom:45@end",)
-    planar: bool = False
-    max_iterations: int = 30
-    convergence: float = 1e-2
-    smoothness_weight: float = 1.0
+    layer_height_mm: float = _JOB["slicing"]["layer_height_mm"]
+    critical: tuple[str, ...] = _JOB["slicing"]["critical"]
+    planar: bool = _JOB["slicing"]["planar"]
+    max_iterations: int = _JOB["slicing"]["max_iterations"]
+    convergence: float = _JOB["slicing"]["convergence"]
+    smoothness_weight: float = _JOB["slicing"]["smoothness_weight"]
 
     def __post_init__(self) -> None:
         if not 0.01 <= self.layer_height_mm <= 20.0:
@@ -166,21 +170,21 @@ class SlicingConfig:
 
 @dataclass(frozen=True)
 class ToolpathConfig:
-    first_pattern: Literal["contour", "stripe"] = "contour"
-    waypoint_spacing: float = 0.333
-    deformation_iterations: int = 200
-    deformation_tolerance: float = 0.01
-    volume_tolerance: float = 0.005
-    min_path_length_mm: float = 1.0
-    join_factor: float = 3.0
-    fit_bands: bool = True
-    pitch_width: bool = True
-    flush: bool = True
-    stripe_perimeter: bool = False
-    first_layer_beta: float = 0.0
-    boundary_distance: Literal["eikonal", "heat"] = "eikonal"
-    measure_baselines: bool = True
-    max_step_elevation_deg: float = 20.0
+    first_pattern: Literal["contour", "stripe"] = _JOB["toolpath"]["first_pattern"]
+    waypoint_spacing: float = _JOB["toolpath"]["waypoint_spacing"]
+    deformation_iterations: int = _JOB["toolpath"]["deformation_iterations"]
+    deformation_tolerance: float = _JOB["toolpath"]["deformation_tolerance"]
+    volume_tolerance: float = _JOB["toolpath"]["volume_tolerance"]
+    min_path_length_mm: float = _JOB["toolpath"]["min_path_length_mm"]
+    join_factor: float = _JOB["toolpath"]["join_factor"]
+    fit_bands: bool = _JOB["toolpath"]["fit_bands"]
+    pitch_width: bool = _JOB["toolpath"]["pitch_width"]
+    flush: bool = _JOB["toolpath"]["flush"]
+    stripe_perimeter: bool = _JOB["toolpath"]["stripe_perimeter"]
+    first_layer_beta: float = _JOB["toolpath"]["first_layer_beta"]
+    boundary_distance: Literal["eikonal", "heat"] = _JOB["toolpath"]["boundary_distance"]
+    measure_baselines: bool = _JOB["toolpath"]["measure_baselines"]
+    relieve_bends: bool = _JOB["toolpath"]["relieve_bends"]
 
     def __post_init__(self) -> None:
         if self.boundary_distance not in ("eikonal", "heat"):
@@ -199,13 +203,26 @@ class ToolpathConfig:
             raise ValueError("min_path_length_mm must be >= 0")
         if self.first_layer_beta != 0.0 and not 0.3 <= self.first_layer_beta <= 1.0:
             raise ValueError("first_layer_beta must be 0 (the profile's beta) or in [0.3, 1]")
-        if not 0.0 <= self.max_step_elevation_deg <= 60.0:
-            raise ValueError("max_step_elevation_deg must be 0 (off) or up to 60 (deg)")
+
+
+_PROFILE_NAME = re.compile(r"^[a-z0-9][a-z0-9._-]{0,63}$")
 
 
 @dataclass(frozen=True)
 class ExtrusionConfig:
-    profile: str = "ecoflex-0030"
+    """The extrusion profile: "active" (the cell's active profile, resolved when the job is
+    sliced), a profile name (the lab's library or ``slicer/profiles/NAME.toml``) or the path of
+    a profile ``.toml``; nothing else is read (a name cannot leave the profiles folder)."""
+
+    profile: str = _JOB["extrusion"]["profile"]
+
+    def __post_init__(self) -> None:
+        if self.profile.endswith(".toml") and len(self.profile) <= 4096:
+            return
+        if not _PROFILE_NAME.match(self.profile) or self.profile.endswith(".toml"):
+            raise ValueError(f"profile = {self.profile!r} is neither a bundled profile name "
+                             "nor a path ending in .toml; name one (e.g. ecoflex-0030) or give "
+                             "a profile .toml")
 
 
 @dataclass(frozen=True)
@@ -221,11 +238,13 @@ class JobConfig:
     def with_overrides(self, **sections: dict[str, Any]) -> JobConfig:
         """A new config with some keys of some sections replaced, validated again."""
         data = {name: vars_of(getattr(self, name)) for name in sections}
+        ranges = job_ranges()
         out = self
         for name, changes in sections.items():
             merged = {**data[name], **changes}
             section_cls = type(getattr(self, name))
-            out = replace(out, **{name: build(section_cls, merged, name)})
+            own = {k[len(name) + 1:]: v for k, v in ranges.items() if k.startswith(f"{name}.")}
+            out = replace(out, **{name: build(section_cls, merged, name, own, RANGES_FILE)})
         return out
 
 
@@ -242,9 +261,23 @@ def default_data() -> dict[str, Any]:
     return tomllib.loads(text)
 
 
+RANGES_FILE = "slicer/ranges.toml"
+
+
+def job_ranges() -> dict[str, tuple[float, float]]:
+    """The accepted range of every number of a job (``slicer/ranges.toml``)."""
+    text = resources.files("slicer").joinpath("ranges.toml").read_text()
+    return read_ranges(text, RANGES_FILE)
+
+
 def load_job(path: Path | None = None) -> JobConfig:
-    """The defaults, overridden by the job file at ``path`` if given."""
+    """The defaults, overridden by the job file at ``path`` if given; every number finite and
+    within its range (``slicer/ranges.toml``), the extrusion profile readable."""
+    from slicer.extrusion import load_profile
+
     data = default_data()
     if path is not None:
         data = merge(data, read_toml(path))
-    return build(JobConfig, data, "job")
+    job = build(JobConfig, data, "job", job_ranges(), RANGES_FILE)
+    load_profile(job.extrusion.profile)  # read and checked now, not after the tet mesh
+    return job

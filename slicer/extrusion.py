@@ -7,10 +7,17 @@ ratio beta (H = beta * h_f, paper section 3.2) the speed for a layer height H is
 ``W = C / (H v)`` (eq. 4). f is a monotone log-log PCHIP interpolant of the profile's table,
 clamped to the table's range (outside it the speed saturates; W still follows eq. 4 so the
 deposited volume stays correct, only the filament shape is extrapolated).
+
+The profile is the one owner of C, of the set-point that makes the extruder deliver C and of
+the morphology table: a job records the exact profile text it was sliced with
+(``PROFILE_FILE`` in its directory, identified by its sha256), and the planner and the cell read
+them from there.
 """
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
@@ -20,7 +27,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import PchipInterpolator
 
+from slicer.artifacts import atomic_write_bytes
 from slicer.errors import InputError
+
+PROFILE_FILE = "profile.toml"  # the job directory's verbatim copy of its profile
+ACTIVE = "active"  # the job's profile name for "the cell's active profile"
 
 
 @dataclass(frozen=True, eq=False)
@@ -29,23 +40,27 @@ class ExtrusionProfile:
 
     Attributes:
         name: profile name.
-        rate_mm3_s: float, mm^3/s, constant extrusion rate C.
+        rate_mm3_s: float, mm^3/s, constant extrusion rate C (the true, weighed rate).
+        setpoint_mm3_s: float, mm^3/s, the set-point the extruder is commanded to deliver C.
         beta: float, overlap ratio H / h_f, in (0, 1].
         speed: (k,) float64, mm/s, strictly increasing table speeds.
         filament_width: (k,) float64, mm, w_f at each speed, non-increasing.
         filament_height: (k,) float64, mm, h_f at each speed, strictly decreasing.
         provenance: free text: where C, beta and the table come from.
-        calibrated: bool, the morphology table was measured (False = model).
+        calibrated: bool, C was measured at the cell (``mesp calibrate extrusion``).
+        text: the profile's TOML text as read ("" for a profile built in code).
     """
 
     name: str
     rate_mm3_s: float
+    setpoint_mm3_s: float
     beta: float
     speed: NDArray[np.float64]
     filament_width: NDArray[np.float64]
     filament_height: NDArray[np.float64]
     provenance: str = ""
     calibrated: bool = False
+    text: str = field(default="", repr=False)
     _f: PchipInterpolator = field(init=False, repr=False)
     _w: PchipInterpolator = field(init=False, repr=False)
     _h: PchipInterpolator = field(init=False, repr=False)
@@ -59,6 +74,10 @@ class ExtrusionProfile:
         v, w, h = self.speed, self.filament_width, self.filament_height
         if not (np.isfinite(self.rate_mm3_s) and self.rate_mm3_s > 0):
             raise InputError(f"profile '{self.name}': rate_mm3_s = {self.rate_mm3_s}", fix)
+        if not (np.isfinite(self.setpoint_mm3_s) and self.setpoint_mm3_s > 0):
+            raise InputError(f"profile '{self.name}': setpoint_mm3_s = {self.setpoint_mm3_s}",
+                             "fix the profile's setpoint_mm3_s (the rate the extruder is "
+                             "commanded)")
         if not (np.isfinite(self.beta) and 0 < self.beta <= 1):
             raise InputError(f"profile '{self.name}': beta = {self.beta}, need 0 < beta <= 1", fix)
         if not (len(v) == len(w) == len(h)) or len(v) < 2:
@@ -85,6 +104,20 @@ class ExtrusionProfile:
         object.__setattr__(self, "_f", PchipInterpolator(lh[::-1], lv[::-1], extrapolate=False))
         object.__setattr__(self, "_w", PchipInterpolator(lv, lw, extrapolate=False))
         object.__setattr__(self, "_h", PchipInterpolator(lv, lh, extrapolate=False))
+
+    @property
+    def sha256(self) -> str:
+        """Hex sha256 of the profile's text: what identifies a calibration."""
+        return hashlib.sha256(self.text.encode()).hexdigest()
+
+    def save_to_job(self, job_dir: Path) -> Path:
+        """Write the profile's verbatim text into ``job_dir/PROFILE_FILE``."""
+        if not self.text:
+            raise InputError(f"profile '{self.name}' has no file text to record",
+                             "load it with load_profile")
+        path = Path(job_dir) / PROFILE_FILE
+        atomic_write_bytes(path, self.text.encode())
+        return path
 
     @property
     def height_range(self) -> tuple[float, float]:
@@ -138,10 +171,15 @@ class ExtrusionProfile:
 def load_profile(name_or_path: str | Path) -> ExtrusionProfile:
     """Load a bundled profile by name (``ecoflex-0030``) or a profile TOML by path.
 
+    ``ACTIVE`` is resolved by the cell runtime to the cell's active profile; the library alone
+    has no cell, and takes the factory profile (``slicer.profiles.FACTORY``) for it.
+
     Raises:
         InputError: unknown name, unreadable file, missing keys or an invalid table.
     """
-    text_name = str(name_or_path)
+    from slicer.profiles import FACTORY
+
+    text_name = FACTORY if str(name_or_path) == ACTIVE else str(name_or_path)
     path = Path(text_name)
     if path.suffix == ".toml" or path.is_file():
         if not path.is_file():
@@ -163,10 +201,29 @@ def load_profile(name_or_path: str | Path) -> ExtrusionProfile:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise InputError(f"extrusion profile {where} is not valid TOML ({exc})", "fix it") from exc
-    return profile_from_dict(data, where)
+    return profile_from_dict(data, where, text)
 
 
-def profile_from_dict(data: dict, where: str = "profile") -> ExtrusionProfile:
+@functools.cache
+def factory_rate() -> float:
+    """C of the factory profile, mm^3/s: the default of models built without a profile."""
+    return load_profile(ACTIVE).rate_mm3_s
+
+
+def load_job_profile(job_dir: Path) -> ExtrusionProfile:
+    """The profile a job was sliced with (``job_dir/PROFILE_FILE``).
+
+    Raises:
+        InputError: the job has no recorded profile (sliced by an older version) or it is bad.
+    """
+    path = Path(job_dir) / PROFILE_FILE
+    if not path.is_file():
+        raise InputError(f"job {Path(job_dir).name} records no extrusion profile ({path})",
+                         "re-slice the job (re-submit it)")
+    return load_profile(path)
+
+
+def profile_from_dict(data: dict, where: str = "profile", text: str = "") -> ExtrusionProfile:
     """Build a profile from parsed TOML (keys as in ``slicer/profiles/ecoflex-0030.toml``)."""
     fix = "see slicer/profiles/ecoflex-0030.toml for the format"
     try:
@@ -174,12 +231,14 @@ def profile_from_dict(data: dict, where: str = "profile") -> ExtrusionProfile:
         return ExtrusionProfile(
             name=str(data.get("name", where)),
             rate_mm3_s=float(data["rate_mm3_s"]),
+            setpoint_mm3_s=float(data["setpoint_mm3_s"]),
             beta=float(data["beta"]),
             speed=np.asarray(table["speed_mm_s"], dtype=np.float64),
             filament_width=np.asarray(table["filament_width_mm"], dtype=np.float64),
             filament_height=np.asarray(table["filament_height_mm"], dtype=np.float64),
             provenance=str(data.get("provenance", "")),
             calibrated=bool(data.get("calibrated", False)),
+            text=text,
         )
     except KeyError as exc:
         raise InputError(f"extrusion profile {where} lacks key {exc}", fix) from exc

@@ -11,6 +11,8 @@ edges, rather than guessed shut.
 
 from __future__ import annotations
 
+import contextlib
+import io
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,6 +32,8 @@ TET_SUFFIXES = (".msh", ".vtk", ".vtu")
 SMALL_HOLE_FRACTION = 0.05
 # Below this volume (relative to the bounding-box diagonal cubed) the solid is flat.
 FLAT_VOLUME_FRACTION = 1e-9
+# A model file larger than this is refused before it is read (a binary STL of 20 M triangles).
+MAX_MODEL_BYTES = 1 << 30
 
 
 @dataclass(frozen=True, eq=False)
@@ -105,6 +109,9 @@ def _check_file(path: Path, suffixes: tuple[str, ...], what: str) -> None:
         )
     if path.stat().st_size == 0:
         raise InputError(f"{path} is empty (0 bytes)", "export the model again")
+    if path.stat().st_size > MAX_MODEL_BYTES:
+        raise InputError(f"{path} is {path.stat().st_size / 2**30:.1f} GiB, larger than "
+                         f"{MAX_MODEL_BYTES >> 30} GiB", "decimate the mesh before exporting it")
 
 
 def _looks_like_stl(path: Path) -> bool:
@@ -125,8 +132,8 @@ def _read_trimesh(path: Path) -> trimesh.Trimesh:
     fix = "export it again as a binary STL, OBJ or PLY triangle mesh"
     try:
         loaded = trimesh.load_mesh(path, file_type=path.suffix.lower().lstrip("."), process=False)
-    except Exception as exc:  # trimesh raises many types for malformed files
-        problem = f"{path} is not a readable mesh ({type(exc).__name__}: {exc})"
+    except (Exception, SystemExit) as exc:  # trimesh raises many types for malformed files
+        problem = f"{path} is not a readable mesh ({type(exc).__name__}: {_short(exc)})"
         raise InputError(problem, fix) from exc
     if isinstance(loaded, trimesh.Scene):
         loaded = loaded.to_geometry() if loaded.geometry else trimesh.Trimesh()
@@ -136,7 +143,21 @@ def _read_trimesh(path: Path) -> trimesh.Trimesh:
         if path.suffix.lower() == ".stl" and not _looks_like_stl(path):
             raise InputError(f"{path} is not an STL file (neither binary nor ASCII STL)", fix)
         raise InputError(f"{path} contains no triangles", fix)
+    vertices = np.asarray(loaded.vertices)
+    faces = np.asarray(loaded.faces)
+    if vertices.ndim != 2 or vertices.shape[1] != 3 or vertices.dtype.kind != "f":
+        raise InputError(f"{path} does not hold 3-D vertices ({vertices.shape})", fix)
+    if faces.ndim != 2 or faces.shape[1] != 3 or faces.dtype.kind not in "iu":
+        raise InputError(f"{path} does not hold triangles ({faces.shape})", fix)
+    if faces.min() < 0 or faces.max() >= len(vertices):
+        raise InputError(f"{path} has faces naming vertices it does not have "
+                         f"(index {int(faces.max())}, {len(vertices)} vertices)", fix)
     return loaded
+
+
+def _short(exc: BaseException) -> str:
+    """A library's message on one line, at most 200 characters."""
+    return " ".join(str(exc).split())[:200]
 
 
 def _boundary_loops(mesh: trimesh.Trimesh) -> tuple[int, np.ndarray]:
@@ -300,7 +321,13 @@ def load_surface(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
     if factor != 1.0:
         mesh.apply_scale(factor)
     _check_size(mesh.vertices, name, config)
-    mesh = _repair(mesh, name, notes)
+    try:
+        mesh = _repair(mesh, name, notes)
+    except InputError:
+        raise
+    except (ValueError, IndexError, OverflowError) as exc:  # trimesh on a malformed surface
+        raise InputError(f"{name} is not a valid triangle surface ({type(exc).__name__}: "
+                         f"{_short(exc)})", "export it again as a closed triangle mesh") from exc
     diagonal = float(np.linalg.norm(mesh.extents))
     tri = mesh.vertices[mesh.faces]
     volume = float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6)
@@ -336,13 +363,15 @@ def _check_size(vertices: np.ndarray, name: str, config: ModelConfig) -> None:
         raise InputError(
             f"{name} is {size:.4g} mm across, larger than {config.max_size_mm:g} mm "
             f"(read as {given})",
-            "if the file is in smaller units, say so with --units (mm, cm, m, in)",
+            "if the file is in smaller units, say so with --units (mm, cm, m, in) or "
+            "[model] units in the job file",
         )
     if size < config.min_size_mm:
         raise InputError(
             f"{name} is {size:.4g} mm across, smaller than {config.min_size_mm:g} mm "
             f"(read as {given})",
-            "if the file is in larger units, say so with --units (cm, m, in)",
+            "if the file is in larger units, say so with --units (cm, m, in) or [model] "
+            "units in the job file",
         )
 
 
@@ -361,13 +390,14 @@ def load_tet_mesh(path: str | Path, units: str | ModelConfig = "mm") -> TetMesh:
     path = Path(path)
     config = _model_config(units)
     _check_file(path, TET_SUFFIXES, "tet mesh")
+    said = io.StringIO()  # meshio prints its complaint to stderr, then calls sys.exit(1)
     try:
-        data = meshio.read(path)
-    except Exception as exc:  # meshio raises many types for malformed files
-        raise InputError(
-            f"{path} is not a readable tet mesh ({type(exc).__name__}: {exc})",
-            "write it again as Gmsh .msh, .vtk or .vtu",
-        ) from exc
+        with contextlib.redirect_stderr(said), contextlib.redirect_stdout(said):
+            data = meshio.read(path)
+    except (Exception, SystemExit) as exc:  # malformed files: many types, and sys.exit(1)
+        why = _short(exc) if not isinstance(exc, SystemExit) else " ".join(said.getvalue().split())
+        raise InputError(f"{path} is not a readable tet mesh ({why[:200] or type(exc).__name__})",
+                         "write it again as Gmsh .msh, .vtk or .vtu") from exc
     blocks = [np.asarray(c.data) for c in data.cells if c.type == "tetra"]
     if not blocks:
         kinds = ", ".join(sorted({c.type for c in data.cells})) or "none"
@@ -375,13 +405,19 @@ def load_tet_mesh(path: str | Path, units: str | ModelConfig = "mm") -> TetMesh:
             f"{path.name} has no tetrahedra (cell types: {kinds})",
             "give a volume mesh, or give the surface (STL/OBJ/PLY) and let mesp tetrahedralize it",
         )
-    points = np.asarray(data.points, dtype=np.float64)
-    if points.ndim != 2 or points.shape[1] != 3:
+    points = np.asarray(data.points)
+    if points.ndim != 2 or points.shape[1] != 3 or points.dtype.kind not in "fiu":
         raise InputError(f"{path.name} does not have 3-D points", "give a 3-D tet mesh")
-    vertices = points * config.scale_mm
+    if not np.all(np.isfinite(points)):
+        raise InputError(f"{path.name} has NaN or infinite point coordinates",
+                         "export the tet mesh again")
+    vertices = points.astype(np.float64) * config.scale_mm
     vertices = vertices * _scale_to(vertices, config, [])
-    tets = np.vstack(blocks).astype(np.int64)
-    if tets.min() < 0 or tets.max() >= len(vertices):
+    tets = np.vstack(blocks)
+    if tets.ndim != 2 or tets.shape[1] != 4 or tets.dtype.kind not in "iu":
+        raise InputError(f"{path.name} has malformed tetra cells", "export it again")
+    tets = tets.astype(np.int64)
+    if len(tets) == 0 or tets.min() < 0 or tets.max() >= len(vertices):
         raise InputError(f"{path.name} has tets indexing missing points", "export it again")
     _check_size(vertices, path.name, config)
     vertices, tets = compact(vertices, tets)

@@ -14,7 +14,9 @@ import numpy as np
 import tomli_w
 import trimesh
 
+from slicer.alpha_range import AlphaRange
 from slicer.artifacts import atomic_write_bytes
+from slicer.budget import check_budget
 from slicer.config import JobConfig
 from slicer.configtools import to_dict
 from slicer.errors import InputError
@@ -35,8 +37,13 @@ def slice_model(
     job: JobConfig,
     progress: Progress | None = None,
     until: Until = "toolpath",
+    alpha: AlphaRange | None = None,
 ) -> dict[str, Any]:
-    """Slice ``model`` into ``out_dir``; returns the report written to ``report.json``."""
+    """Slice ``model`` into ``out_dir``; returns the report written to ``report.json``.
+
+    ``alpha`` is the printing-angle range of the cell the job is for (None: the bundled cell's);
+    the toolpath's step limits follow from it.
+    """
     from slicer import mesh_io, tetrahedralize
 
     model = Path(model)
@@ -54,6 +61,7 @@ def slice_model(
         else:
             given = None
             surface = mesh_io.load_surface(model, units=job.model)
+        check_budget(surface.bbox_mm, job)
         _save_surface(surface, out_dir / "model.ply")
     report["model"] = {
         "volume_mm3": surface.volume_mm3,
@@ -85,7 +93,7 @@ def slice_model(
 
     with timer.stage("toolpath"):
         report["toolpath"] = _toolpath(tetmesh, extraction, job, out_dir, surface.volume_mm3,
-                                       progress)
+                                       progress, alpha or AlphaRange.bundled())
     return _finish(out_dir, report, timer, t0)
 
 
@@ -188,7 +196,7 @@ def _slice(
 
 def _toolpath(
     tetmesh: TetMesh, extraction: LayerExtraction, job: JobConfig, out_dir: Path,
-    model_volume: float, progress: Progress | None,
+    model_volume: float, progress: Progress | None, alpha: AlphaRange,
 ) -> dict[str, Any]:
     """Toolpath generation, its files, pictures and report section."""
     from slicer.extrusion import load_profile
@@ -209,15 +217,17 @@ def _toolpath(
 
         # exposed filaments (first/last layers, treads under a slope) moved inwards so they
         # do not bulge out of the model; the deposited ink is unchanged
-        toolpath, flushed = flush_toolpath(toolpath, tetmesh, profile)
+        toolpath, flushed = flush_toolpath(toolpath, tetmesh, profile, alpha=alpha)
         report["flush"] = flushed.as_dict()
-    if job.toolpath.max_step_elevation_deg > 0:
+    if job.toolpath.relieve_bends:
         from slicer.toolpath.relief import relieve_bends
 
-        # no nozzle angle within alpha [70, 110] follows a path that bends out of its layer
-        toolpath, relief = relieve_bends(toolpath, job.toolpath.max_step_elevation_deg)
-        report["bend_relief"] = relief.as_dict()
+        # no nozzle angle within the cell's alpha range follows a path that bends out of its
+        # layer
+        toolpath, relief = relieve_bends(toolpath, alpha)
+        report["bend_relief"] = {**relief.as_dict(), "limit_deg": alpha.step_elevation_deg}
     toolpath.save(out_dir)
+    profile.save_to_job(out_dir)  # the job's C, set-point and morphology: one owner, recorded
     # what the toolpath leaves bare or covers twice (connectors included), and the printing
     # directions the robot will have to follow
     start = time.perf_counter()

@@ -16,6 +16,13 @@ import numpy as np
 from slicer.artifacts import Schema, load_npz, save_npz
 from slicer.errors import InputError
 
+#: Rows of any stage array at most (50 M tets / waypoints: far beyond a printable part).
+MAX_ROWS = 50_000_000
+#: Coordinates of a model or toolpath in mm, at most this far from the origin.
+MAX_COORDINATE_MM = 10_000.0
+#: A waypoint's layer height (mm), width (mm) and speed (mm/s) at most.
+MAX_HEIGHT_MM, MAX_WIDTH_MM, MAX_SPEED_MM_S = 20.0, 100.0, 10_000.0
+
 
 def _frozen(arr: np.ndarray, dtype: type | np.dtype) -> np.ndarray:
     out = np.ascontiguousarray(arr, dtype=dtype)
@@ -50,13 +57,32 @@ class Stage:
 
     @classmethod
     def load(cls, job_dir: Path) -> Self:
-        """Read the stage file from ``job_dir``; a missing or malformed file is an InputError."""
+        """Read the stage file from ``job_dir``; a missing or malformed file is an InputError:
+        mis-shaped or inconsistent arrays, a NaN or infinite number, more rows than
+        ``MAX_ROWS``, or values the stage cannot hold (``check``)."""
         path = Path(job_dir) / cls.FILE
         arrays = load_npz(path, cls.SCHEMA)
+        writer = "mesp plan" if cls.FILE == "trajectory.npz" else "mesp slice"
+        fix = f"re-run the stage that writes it ({writer})"
+        for name, arr in arrays.items():
+            if name in cls.DTYPES and len(arr) > MAX_ROWS:
+                raise InputError(f"{path}: '{name}' has {len(arr):,} rows, more than {MAX_ROWS:,}",
+                                 fix)
+            if name in cls.DTYPES and arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+                raise InputError(f"{path}: '{name}' holds NaN or infinite values", fix)
         try:
-            return cls(**{name: arrays[name] for name in cls.DTYPES})
-        except ValueError as exc:
-            raise InputError(f"{path} is inconsistent ({exc})", "re-run the stage") from exc
+            stage = cls(**{name: arrays[name] for name in cls.DTYPES})
+        except (ValueError, TypeError, OverflowError) as exc:
+            raise InputError(f"{path} is inconsistent ({exc})", fix) from exc
+        problem = stage.check()
+        if problem:
+            raise InputError(f"{path}: {problem}", fix)
+        return stage
+
+    def check(self) -> str:
+        """'' if the values are ones the later stages can use, else what is wrong (a file
+        from outside: ``load`` refuses it)."""
+        return ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -83,6 +109,14 @@ class TetMesh(Stage):
             raise ValueError(f"tets must be (T, 4), got {self.tets.shape}")
         if self.tets.size and (self.tets.min() < 0 or self.tets.max() >= len(self.vertices)):
             raise ValueError("tets index outside vertices")
+
+    def check(self) -> str:
+        """'' if the mesh has tets within ``MAX_COORDINATE_MM`` of the origin."""
+        if len(self.tets) == 0:
+            return "the tet mesh has no tet"
+        if np.abs(self.vertices).max() > MAX_COORDINATE_MM:
+            return f"a vertex lies beyond {MAX_COORDINATE_MM:g} mm of the origin"
+        return ""
 
 
 @dataclass(frozen=True, eq=False)
@@ -254,3 +288,34 @@ class Toolpath(Stage):
 
     def __len__(self) -> int:
         return len(self.position)
+
+    def check(self) -> str:
+        """'' if every waypoint can be printed, else the first problem: no waypoint, none
+        extruding, a coordinate beyond ``MAX_COORDINATE_MM``, a normal not of unit length, a
+        height, width or speed not > 0 or above its ``MAX_*``, a negative layer or path, an
+        unknown pattern."""
+        if len(self) == 0:
+            return "the toolpath has no waypoint"
+        if not self.extrude.any():
+            return "the toolpath deposits nothing (no waypoint extrudes)"
+        if np.abs(self.position).max() > MAX_COORDINATE_MM:
+            return (f"a waypoint lies {np.abs(self.position).max():.3g} mm from the origin, "
+                    f"beyond {MAX_COORDINATE_MM:g} mm")
+        with np.errstate(over="ignore"):  # a normal of 1e300 is refused below, not warned
+            norm = np.linalg.norm(self.normal, axis=1)
+        if np.any(np.abs(norm - 1.0) > 1e-3):
+            return f"normal {int(np.argmax(np.abs(norm - 1.0)))} is not a unit vector"
+        for name, top in (("height", MAX_HEIGHT_MM), ("width", MAX_WIDTH_MM),
+                          ("speed", MAX_SPEED_MM_S)):
+            values = getattr(self, name)
+            if values.min() <= 0:
+                return f"'{name}' of waypoint {int(np.argmin(values))} is {values.min():g}, not > 0"
+            if values.max() > top:
+                return (f"'{name}' of waypoint {int(np.argmax(values))} is {values.max():.3g}, "
+                        f"above {top:g}")
+        for name in ("layer", "path"):
+            if getattr(self, name).min() < 0:
+                return f"'{name}' holds a negative index"
+        if not np.isin(self.pattern, (PATTERN_CONTOUR, PATTERN_STRIPE)).all():
+            return "'pattern' holds a value other than 0 (contour) or 1 (stripe)"
+        return ""

@@ -10,7 +10,6 @@ import numpy as np
 
 from slicer.errors import InputError
 
-DEFAULT_PROFILE = "ecoflex-0030"
 DEFAULT_VOXEL_MM = 0.25
 # Voxels of the default grid: the socket (137 x 125 x 212 mm) at 0.35 mm, ~40 s and ~4.3 GB.
 AUTO_VOXEL_BUDGET = 100_000_000
@@ -52,7 +51,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     group.add_argument("--gcode", type=Path, metavar="FILE",
                        help="also print this planar G-code (Cura/PrusaSlicer) and compare")
     p.add_argument("--profile", default=None, metavar="NAME",
-                   help=f"extrusion profile name or TOML path (default {DEFAULT_PROFILE})")
+                   help="extrusion profile name or TOML path (default: the profile the job was "
+                   "sliced with, DIR/profile.toml)")
     p.add_argument("--baseline-height", type=float, default=None, metavar="MM",
                    help="planar baseline layer height (default: median toolpath height)")
     p.add_argument("--baseline-beta", type=float, default=None, metavar="B",
@@ -116,8 +116,9 @@ def run(args: argparse.Namespace) -> int:
             raise InputError(f"{name} {value} is out of range", "use 0 to 10 s, e.g. 0.2")
     if args.gcode is not None and not Path(args.gcode).is_file():
         raise InputError(f"G-code file {args.gcode} does not exist", "check the --gcode path")
-    if args.filament < 0:
-        raise InputError(f"--filament {args.filament} is negative", "use a diameter, or 0")
+    if not (np.isfinite(args.filament) and 0.0 <= args.filament <= 10.0):
+        raise InputError(f"--filament {args.filament} is out of range",
+                         "use a diameter of 0 to 10 mm (0: E is a volume in mm^3)")
     for name, value, lo, hi in (("--baseline-height", args.baseline_height, 0.02, 20.0),
                                 ("--baseline-beta", args.baseline_beta, 0.1, 1.0)):
         if value is not None and not lo <= value <= hi:
@@ -134,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     with timer.stage("load"):
         toolpath = Toolpath.load(job)
         vertices, faces = _load_model(job / "model.ply")
-        morphology, profile_name = _load_morphology(args.profile, console)
+        morphology, profile_name = _load_morphology(args.profile, console, job)
     voxel = args.voxel if args.voxel is not None else _auto_voxel(vertices, console)
     config = DepositionConfig(voxel_mm=float(voxel))
     flush: dict[str, Any] | None = None
@@ -239,8 +240,9 @@ def _load_model(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return vertices, faces
 
 
-def _load_morphology(name: str | None, console: Any) -> tuple[Any, str]:
-    """The extrusion profile (slicer.extrusion), or a plain ellipse model if it is missing."""
+def _load_morphology(name: str | None, console: Any, job: Path) -> tuple[Any, str]:
+    """The extrusion profile (``name``, else the job's own, else the factory profile), or a
+    plain ellipse model if slicer.extrusion is missing."""
     from sim.deposition import EllipseMorphology
 
     try:
@@ -249,10 +251,16 @@ def _load_morphology(name: str | None, console: Any) -> tuple[Any, str]:
         if name is not None:
             raise InputError("extrusion profiles are not available in this installation",
                              "drop --profile") from None
-        console.info("note: no extrusion profile module; using a round filament at C = 6.57")
+        console.info("note: no extrusion profile module; using a round filament "
+                     "(sim.deposition.EllipseMorphology)")
         return EllipseMorphology(), "ellipse (default)"
-    chosen = name or DEFAULT_PROFILE
-    return load_profile(chosen), chosen
+    from slicer.extrusion import PROFILE_FILE
+    from slicer.profiles import FACTORY
+
+    recorded = job / PROFILE_FILE
+    chosen = name or (str(recorded) if recorded.is_file() else FACTORY)
+    profile = load_profile(chosen)
+    return profile, profile.name
 
 
 def _planned_speeds(job: Path, toolpath: Any) -> tuple[Any, Any]:

@@ -77,6 +77,23 @@ def line(job: JobRecord) -> str:
     return text
 
 
+def profile_line(job: JobRecord) -> str:
+    """The extrusion profile of the job and the one its cell prints with (``mesp profile``)."""
+    from mesp_cell import profiles
+    from slicer.extrusion import PROFILE_FILE, load_profile
+
+    active = profiles.active(job.cell)
+    recorded = Path(job.dir) / PROFILE_FILE
+    if not recorded.is_file():
+        return (f"  profile: not sliced yet; cell '{job.cell}' prints with "
+                f"{profiles.describe(active)}")
+    mine = load_profile(recorded)
+    if mine.sha256 == active.sha256:
+        return f"  profile {profiles.describe(mine)} (the cell's active profile)"
+    return (f"  profile {profiles.describe(mine)}; not the cell's active profile "
+            f"{active.name} ({active.sha256[:12]}): re-submit to print it")
+
+
 def submit(args: argparse.Namespace) -> int:
     client = _client(args)
     try:
@@ -130,7 +147,9 @@ def status(args: argparse.Namespace) -> int:
     try:
         if args.follow:
             return _follow(client, args.job_id)
-        print(line(client.status(args.job_id)))
+        job = client.status(args.job_id)
+        print(line(job))
+        print(profile_line(job))
     finally:
         client.close()
     return 0

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import signal
 import sys
 from pathlib import Path
@@ -34,9 +35,14 @@ def parse_sets(items: list[str]) -> dict[str, object]:
             out[name] = int(value)
         except ValueError:
             try:
-                out[name] = float(value)
+                number = float(value)
             except ValueError:
                 out[name] = value
+                continue
+            if not math.isfinite(number):
+                raise InputError(f"--set {item} is not a finite number",
+                                 f"give {name} a number, e.g. --set {name}=1.0") from None
+            out[name] = number
     return out
 
 

@@ -62,14 +62,24 @@ def register(sub: Any) -> None:
         default="toolpath",
         help="stop after this stage (default: toolpath)",
     )
+    p.add_argument("--cell", type=Path, metavar="CELL.toml", default=None,
+                   help="cell file the job is for: its printing-angle range sets the "
+                   "toolpath's step limits (default: the bundled cell)")
+    p.add_argument("--on", metavar="CELL", default=None,
+                   help="the cell whose active extrusion profile the job's profile \"active\" "
+                   "is (`mesp profile`; default: the only cell running, else 'sim')")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=run)
 
 
 def job_from_args(args: argparse.Namespace) -> JobConfig:
     """The job file (or defaults) with the command-line overrides applied and validated."""
+    from mesp_cell import profiles
+
     job = load_job(args.job)
-    overrides: dict[str, dict[str, Any]] = {}
+    cell = getattr(args, "on", None) or profiles.default_cell()
+    overrides: dict[str, dict[str, Any]] = {
+        "extrusion": {"profile": profiles.resolve(job.extrusion.profile, cell)}}
     if args.units or args.scale_to is not None:
         overrides["model"] = {
             **({"units": args.units} if args.units else {}),
@@ -100,7 +110,11 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--out {args.out} is a file", "name a directory")
     progress = ConsoleProgress(quiet=args.quiet)
     progress.info(f"slicing {args.model} -> {args.out}")
-    report = slice_model(args.model, args.out, job, progress=progress, until=args.until)
+    from planner.cell import load_cell
+
+    alpha = load_cell(args.cell).planning.alpha_range
+    report = slice_model(args.model, args.out, job, progress=progress, until=args.until,
+                         alpha=alpha)
     summary = {
         "layers": report.get("slicing", {}).get("layers"),
         "waypoints": report.get("toolpath", {}).get("waypoints"),

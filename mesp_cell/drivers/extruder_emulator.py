@@ -17,6 +17,7 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from mesp_cell.drivers import registers as R
@@ -168,6 +169,15 @@ class EmulatorThread:
         self._thread.join(5.0)
 
 
+def write_truth(plant: ExtruderPlant, path: str) -> None:
+    """The plant's hidden truth as JSON: delivered and totalised volume, mm^3."""
+    from slicer.artifacts import write_json
+
+    plant.step(time.monotonic())
+    write_json(Path(path), {"true_volume_mm3": plant.true_volume, "volume_mm3": plant.volume,
+                            "gain": plant.params.gain})
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Process entry point."""
     ap = argparse.ArgumentParser(prog="extruder_emulator", description=__doc__)
@@ -175,6 +185,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--port", type=int, default=0, help="TCP port (0 = a free one)")
     ap.add_argument("--tau", type=float, default=0.2, help="flow time constant, s")
     ap.add_argument("--gain", type=float, default=1.0, help="hidden true/nominal rate ratio")
+    ap.add_argument("--startup-tau", type=float, default=0.0,
+                    help="s, lag of the delivered flow behind the screw's (start-up transient)")
+    ap.add_argument("--truth", default="",
+                    help="file the hidden truth (delivered volume, mm^3) is written to, for "
+                         "test benches; nothing on the link reports it")
     ap.add_argument("--watchdog", type=float, default=0.5, help="host watchdog, s (0 = off)")
     ap.add_argument("--time-scale", type=float, default=1.0,
                     help="the flow and totaliser run this many times faster than real time")
@@ -186,7 +201,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if not args.time_scale > 0:
         ap.error(f"--time-scale {args.time_scale} must be > 0")
     emu = ModbusEmulator(PlantParams(tau_s=args.tau, gain=args.gain, watchdog_s=args.watchdog,
-                                     time_scale=args.time_scale),
+                                     time_scale=args.time_scale,
+                                     startup_tau_s=args.startup_tau),
                          host=args.host, port=args.port,
                          clock=SimClock(args.time_scale, args.clock or None, reset=True))
 
@@ -202,8 +218,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         while not task.done():
             if orphaned.is_set():
                 emu.stop()
+            if args.truth:
+                write_truth(emu.plant, args.truth)
             await asyncio.sleep(0.2)
         await task
+        if args.truth:
+            write_truth(emu.plant, args.truth)
 
     try:
         asyncio.run(run())

@@ -4,6 +4,12 @@ Shared by the Modbus emulator and the serial emulator so both speak for the same
 ``gain`` is the hidden truth that calibration must recover: the controller measures its rate from
 the screw speed (``rate``, ``volume``: nominal), but the screw really delivers ``gain`` times that
 (``true_volume``), and nothing on the link reports ``gain``; only weighing the output does.
+The true rate at a set-point s is ``gain * s`` once the flow has settled.
+
+Start-up transient: the silicone in the barrel is compressed before it flows, so what leaves
+the nozzle follows the screw's flow through a second first-order lag ``startup_tau_s``: it lags
+behind at every start and keeps oozing after a stop (the volume is the same once settled).
+``mesp_cell.drivers.scale_emulator`` adds the noise of the mass readings.
 """
 
 from __future__ import annotations
@@ -25,6 +31,7 @@ class PlantParams:
         gain: true delivered volume / nominal volume (hidden from the host).
         max_rate: mm^3/s, set-points are clamped to [0, max_rate].
         watchdog_s: s, host heartbeat timeout while running (0 = off), wall-clock.
+        startup_tau_s: s, lag of the delivered flow behind the screw's (compression; 0 = none).
         time_scale: the flow and the totaliser run this many times faster than the wall clock
             (1 = real time). On the simulated cell they run on the clock the robot twin
             shares (``sim_clock.SimClock``), which also pauses while the twin lags. The
@@ -36,11 +43,13 @@ class PlantParams:
     max_rate: float = 50.0
     watchdog_s: float = 0.5
     time_scale: float = 1.0
+    startup_tau_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not (self.tau_s > 0 and self.gain > 0 and self.max_rate > 0 and self.watchdog_s >= 0
-                and self.time_scale > 0):
-            raise ValueError("tau_s, gain, max_rate, time_scale must be > 0 and watchdog_s >= 0")
+                and self.time_scale > 0 and self.startup_tau_s >= 0):
+            raise ValueError("tau_s, gain, max_rate, time_scale must be > 0, watchdog_s and "
+                             "startup_tau_s >= 0")
 
 
 class ExtruderPlant:
@@ -55,6 +64,7 @@ class ExtruderPlant:
         self.watchdog_s = params.watchdog_s
         self.rate_set = 0.0
         self.rate = 0.0
+        self.out_rate = 0.0  # mm^3/s (nominal units) leaving the nozzle, behind ``rate``
         self.volume = 0.0
         self.true_volume = 0.0
         self.running = False
@@ -82,12 +92,30 @@ class ExtruderPlant:
                 self.fault |= FAULT_STALL
             on = self.running and not self.stalled and self.fault == 0
             target = self.rate_set if on else 0.0
-            decay = math.exp(-dt / self.params.tau_s)
-            # Integral of r(t) = target + (r0 - target) e^{-t/tau} over [0, dt].
-            dv = target * dt + (self.rate - target) * self.params.tau_s * (1 - decay)
+            tau = self.params.tau_s
+            decay = math.exp(-dt / tau)
+            e1 = self.rate - target
+            # Integral of r(t) = target + e1 e^{-t/tau} over [0, dt].
+            dv = target * dt + e1 * tau * (1 - decay)
             self.volume += dv
-            self.true_volume += self.params.gain * dv
-            self.rate = target + (self.rate - target) * decay
+            self.true_volume += self.params.gain * self._delivered(target, e1, dt)
+            self.rate = target + e1 * decay
+
+    def _delivered(self, target: float, e1: float, dt: float) -> float:
+        """Volume (nominal units) leaving the nozzle over ``dt``: the screw's flow
+        ``target + e1 e^{-t/tau}`` through the lag ``startup_tau_s``; advances ``out_rate``."""
+        tau, tau2 = self.params.tau_s, self.params.startup_tau_s
+        if tau2 <= 0:
+            self.out_rate = target + e1 * math.exp(-dt / tau)
+            return target * dt + e1 * tau * (1 - math.exp(-dt / tau))
+        if abs(tau2 - tau) < 1e-6 * tau:
+            tau2 = tau * (1 + 1e-6)  # the closed form below needs distinct time constants
+        e2 = self.out_rate - target
+        d1, d2 = math.exp(-dt / tau), math.exp(-dt / tau2)
+        k = e1 * tau / (tau - tau2)
+        # e2(t) = e2_0 e^{-t/tau2} + k (e^{-t/tau} - e^{-t/tau2}) solves tau2 e2' = e1(t) - e2
+        self.out_rate = target + e2 * d2 + k * (d1 - d2)
+        return target * dt + e2 * tau2 * (1 - d2) + k * (tau * (1 - d1) - tau2 * (1 - d2))
 
     def command(self, word: int, now: float) -> None:
         """Apply a command word (registers.CMD_* bits)."""

@@ -9,21 +9,35 @@ extruder's flow, which integrates over the same clock, waits with it. Without th
 emulated extruder ran on its own scaled clock and kept flowing while the arm lagged: +4.2% of
 ink on the socket at 80x, 2.9 times the toolpath's volume on the hemisphere at 200x.
 
-Between processes the clock lives in a 16-byte file (``path``, mapped in memory): a sequence
-number and ``paused`` (float64, s). The writer makes the sequence odd while it writes, so a
-reader never sees a torn value (a seqlock). Without a path the clock is private to one process.
+Between processes the clock lives in a 24-byte file (``path``, mapped in memory): a sequence
+number and two slots of ``paused`` (float64, s). The one writer puts each new value into the
+slot the current sequence does not point at, then publishes it by storing the next sequence
+number (one aligned 8-byte store). A reader takes the sequence, the slot it points at and the
+sequence again: unchanged, the value is whole (the writer only ever fills the other slot);
+changed (a value was published during the read, which takes under a microsecond), it reads
+again. So a reader never sees a torn value and never waits for a writer, even one stopped or
+killed in the middle of a write: the published slot stays whole. (Store and load order as on
+x86-64, where the cell runs: Python cannot place memory barriers.) Without a path the clock
+is private to one process.
 """
 
 from __future__ import annotations
 
+import ctypes
 import mmap
 import os
-import struct
 import time
 from pathlib import Path
 
-_LAYOUT = struct.Struct("<Qd")  # sequence, paused (s)
-READ_TRIES = 10_000  # a write takes well under a microsecond
+
+class _Shared(ctypes.Structure):
+    """The file's layout: the sequence, then the two slots of ``paused`` (s)."""
+
+    _fields_ = [("seq", ctypes.c_uint64), ("slot", ctypes.c_double * 2)]
+
+
+_SIZE = ctypes.sizeof(_Shared)
+READ_TRIES = 1000  # a reader retries only when a value was published during its read
 
 
 class SimClock:
@@ -43,19 +57,20 @@ class SimClock:
         self.scale = float(scale)
         self.path = Path(path) if path else None
         self._paused = 0.0
-        self._seq = 0
         self._map: mmap.mmap | None = None
+        self._shared: _Shared | None = None
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
             try:
-                if reset or os.fstat(fd).st_size < _LAYOUT.size:
+                if reset or os.fstat(fd).st_size != _SIZE:
                     os.ftruncate(fd, 0)
-                    os.ftruncate(fd, _LAYOUT.size)  # zeros: sequence 0, paused 0.0
-                self._map = mmap.mmap(fd, _LAYOUT.size)
+                    os.ftruncate(fd, _SIZE)  # zeros: sequence 0, paused 0.0
+                self._map = mmap.mmap(fd, _SIZE)
             finally:
                 os.close(fd)
-            self._seq, self._paused = _LAYOUT.unpack_from(self._map, 0)
+            self._shared = _Shared.from_buffer(self._map)
+            self._paused = self.paused()
 
     @staticmethod
     def wall() -> float:
@@ -63,15 +78,16 @@ class SimClock:
         return time.monotonic()
 
     def paused(self) -> float:
-        """Wall seconds during which simulated time stood still."""
-        if self._map is None:
+        """Wall seconds during which simulated time stood still (a whole value, see above)."""
+        shared = self._shared
+        if shared is None:
             return self._paused
         for _ in range(READ_TRIES):
-            seq, paused = _LAYOUT.unpack_from(self._map, 0)
-            if seq & 1 == 0 and _LAYOUT.unpack_from(self._map, 0)[0] == seq:
-                return float(paused)
-        # a writer killed in the middle of a write leaves the sequence odd: its value stands
-        return float(paused)
+            seq = shared.seq
+            value = shared.slot[seq & 1]
+            if shared.seq == seq:
+                return float(value)
+        return float(shared.slot[shared.seq & 1])  # the writer publishing non-stop: its latest
 
     def now(self, wall: float | None = None) -> float:
         """Simulated time at ``wall`` (default: now), s."""
@@ -83,18 +99,18 @@ class SimClock:
 
     def pause(self, wall_s: float) -> None:
         """Hold simulated time for ``wall_s`` more wall seconds (the writer's side)."""
-        if wall_s <= 0:
+        if not wall_s > 0:  # nor NaN: the clock never runs forward or breaks
             return
         self._paused += wall_s
-        if self._map is None:
+        shared = self._shared
+        if shared is None:
             return
-        self._seq += 1
-        struct.pack_into("<Q", self._map, 0, self._seq)  # odd: a write in progress
-        struct.pack_into("<d", self._map, 8, self._paused)
-        self._seq += 1
-        struct.pack_into("<Q", self._map, 0, self._seq)
+        seq = shared.seq
+        shared.slot[(seq + 1) & 1] = self._paused  # the slot readers are not pointed at
+        shared.seq = seq + 1  # publish: one aligned 8-byte store
 
     def close(self) -> None:
+        self._shared = None  # the structure holds the buffer: release it before the map
         if self._map is not None:
             self._map.close()
             self._map = None

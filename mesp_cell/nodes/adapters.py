@@ -2,7 +2,8 @@
 
 A node calls ``slice_job`` / ``plan_job`` here; each can be replaced by a function named
 ``"module:function"`` in the node's parameters (``slice_fn``/``plan_fn``) with the same
-signature, which the tests use to run the cell on synthetic artifacts.
+signature, which the tests use to run the cell on synthetic artifacts. A slice function records
+the extrusion profile it used in the job directory (``slicer.extrusion.PROFILE_FILE``).
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from typing import Any
 
 from slicer.errors import InputError
 
-SliceFn = Callable[[Path, Path | None, Path], dict[str, Any]]
+SliceFn = Callable[[Path, Path | None, Path, str, Path | None], dict[str, Any]]
 PlanFn = Callable[[Path, Path | None], dict[str, Any]]
 
 
@@ -30,8 +31,15 @@ def resolve(spec: str) -> Callable[..., dict[str, Any]]:
     return fn
 
 
-def slice_job(model: Path, job_file: Path | None, out_dir: Path) -> dict[str, Any]:
-    """Slice ``model`` with the job file (None = defaults) into ``out_dir``; the report."""
+def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
+              cell_file: Path | None = None) -> dict[str, Any]:
+    """Slice ``model`` with the job file (None = defaults) into ``out_dir``; the report.
+
+    The job's profile "active" is ``cell``'s active calibration (``mesp_cell.profiles``); the
+    step limits follow the alpha range of the cell file the job is planned in (None = bundled).
+    """
+    from mesp_cell import profiles
+    from planner.cell import load_cell
     from slicer import pipeline
     from slicer.config import load_job
 
@@ -39,8 +47,10 @@ def slice_job(model: Path, job_file: Path | None, out_dir: Path) -> dict[str, An
     if not model.is_file():
         raise InputError(f"model {model} does not exist", "check the path")
     job = load_job(Path(job_file) if job_file else None)
+    job = job.with_overrides(extrusion={"profile": profiles.resolve(job.extrusion.profile, cell)})
     fn = getattr(pipeline, "slice_job", None) or pipeline.slice_model
-    report: dict[str, Any] = fn(model, Path(out_dir), job)
+    alpha = load_cell(Path(cell_file) if cell_file else None).planning.alpha_range
+    report: dict[str, Any] = fn(model, Path(out_dir), job, alpha=alpha)
     return report
 
 

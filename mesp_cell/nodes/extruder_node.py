@@ -112,7 +112,9 @@ class ExtruderNode(LifecycleNode):
         try:
             with self.lock:
                 if verb == "start":
-                    rate = float(cmd.arg("rate", 6.57))
+                    if cmd.arg("rate") is None:
+                        return Reply.refuse("start needs a rate (the job's set-point, mm^3/s)")
+                    rate = float(cmd.arg("rate"))
                     if not 0 < rate <= 1000:
                         return Reply.refuse(f"rate {rate} mm^3/s outside (0, 1000]")
                     self.driver.start(rate)

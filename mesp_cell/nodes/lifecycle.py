@@ -16,11 +16,11 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from mesp_cell.bus.session import Bus, BusConfig
-from mesp_cell.messages import Heartbeat
+from mesp_cell.messages import Command, Heartbeat, Reply
 
 log = logging.getLogger("mesp")
 
@@ -53,8 +53,10 @@ class LifecycleNode:
         self.state = "unconfigured"
         self.bus: Bus | None = None
         self.stopping = threading.Event()
+        self.failed = ""  # why the node stopped on its own (a worker thread died)
         self._seq = 0
         self._threads: list[threading.Thread] = []
+        self._workers: list[threading.Thread] = []
 
     # -- hooks -----------------------------------------------------------------------------
     def on_configure(self) -> None:
@@ -109,13 +111,41 @@ class LifecycleNode:
         self._threads.append(t)
         return t
 
+    def serve(self, handler: Callable[[Command], Reply], topic: str = "cmd") -> None:
+        """Answer commands on ``topic`` with ``handler`` on the bus's worker thread, which the
+        heartbeat then watches. Whatever the handler raises, even a library's ``sys.exit``, is
+        a refusal with the reason (the worker lives on); a worker that dies all the same stops
+        the node (``_heartbeat``), so the launcher restarts it instead of it looking alive."""
+        assert self.bus is not None
+
+        def guarded(cmd: Command) -> Reply:
+            try:
+                return handler(cmd)
+            except SystemExit as exc:  # a library called sys.exit: refuse, never exit
+                log.error("command %s on %s: a library exited (%s)", cmd.verb, self.name, exc)
+                return Reply.refuse(f"{cmd.verb} failed: a library gave up on the input "
+                                    f"(exit {exc.code})")
+
+        before = set(threading.enumerate())
+        self.bus.serve(guarded, topic)
+        worker = f"{self.bus.node}-{topic}"  # the name Bus.serve gives its worker thread
+        self._workers += [t for t in threading.enumerate() if t not in before and t.name == worker]
+
     def _heartbeat(self) -> None:
         while not self.stopping.wait(self.heartbeat_s):
             if self.bus is None:
                 return
+            dead = [t.name for t in self._workers if not t.is_alive()]
+            if dead:  # say so and stop: a node that cannot answer must not look healthy
+                self.failed = f"worker thread {dead[0]} died"
+                self.state = "failed"
+                log.error("%s: %s; stopping so the launcher restarts it", self.name, self.failed)
             self._seq += 1
             self.bus.publish("heartbeat", Heartbeat(self.name, self.state, self._seq, os.getpid(),
                                                     time.time()), express=False)
+            if dead:
+                self.stopping.set()
+                return
 
     def run(self) -> int:
         """Configure, activate, serve until SIGINT/SIGTERM, then deactivate and shut down."""
@@ -132,6 +162,8 @@ class LifecycleNode:
             log.info("%s active (pid %d)", self.name, os.getpid())
             while not self.stopping.wait(0.2):
                 pass
+            if self.failed:
+                return 1
         except NodeStartError as exc:
             log.error("%s%s%s%s", START_ERROR, exc.reason, START_FIX, exc.fix)
             return 1

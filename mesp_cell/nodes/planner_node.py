@@ -23,8 +23,7 @@ class PlannerNode(LifecycleNode):
         self.fn = adapters.resolve(spec) if spec else adapters.plan_job
 
     def on_activate(self) -> None:
-        assert self.bus is not None
-        self.bus.serve(self._on_command)
+        self.serve(self._on_command)
 
     def _on_command(self, cmd: Command) -> Reply:
         if cmd.verb != "plan":

@@ -4,13 +4,15 @@ Commands (``robot/cmd``): ``load`` (path, sha256 of trajectory.npz) checks and r
 trajectory; ``move`` (args ``to``: "home" | "sample", ``sample``) moves there on a checked safe
 path (``planner.entry``: retract along the nozzle axis out of the gel, transfer above it,
 plunge along the target's axis; refused with its reason if the cell model finds no such path);
-``stream`` (args ``start``, ``end``, ``after_waypoint``, ``lead_s``, ``rate``) streams the
+``stream`` (args ``start``, ``end``, ``after_waypoint``, ``lead_s``, ``rate``: the job's
+extruder set-point, from its profile) streams the
 samples ``start`` .. ``end`` - 1 (default: to the end) and
 switches the extruder ``lead_s`` ahead of every change of deposition, on the servo clock (lead
 compensation of the extruder's flow response); while depositing it also scales the rate with
-the arm's planned speed, ``lead_s`` ahead (``set_rate`` to C x ``StreamPlan.flow_at``, when it
-moves by more than FLOW_STEP of C, at most every FLOW_INTERVAL_S of wall time), so the ink per
-millimetre stays the slicer's where the planner slowed the arm (``sync_flow``, default on);
+the arm's planned speed, ``lead_s`` ahead (``set_rate`` to the set-point x
+``StreamPlan.flow_at``, when it moves by more than FLOW_STEP of it, at most every
+FLOW_INTERVAL_S of wall time), so the ink per millimetre stays the slicer's where the planner
+slowed the arm (``sync_flow``, default on);
 ``stop``; ``reset`` clears a latched e-stop; ``status`` answers the latched e-stop (reason,
 time), the motion mode and the last stream's stop.
 Motions run in one motion thread; their end is published as a ``StreamEvent`` on
@@ -157,21 +159,22 @@ class MustRun:
         return bool(self.mask[k - self.c0])
 
 
-FLOW_STEP = 0.03  # a rate change smaller than this x C is not sent
+FLOW_STEP = 0.03  # a rate change smaller than this x the set-point is not sent
 FLOW_INTERVAL_S = 0.02  # s of wall time between two rate commands, at least (bus, Modbus)
 
 
 class FlowSync:
     """The rate commands of one stream that keep the ink per millimetre where the arm is
-    slower than the toolpath: at servo sample k, C x ``plan.flow_at(k + lead_n)`` (the step
+    slower than the toolpath: at servo sample k, the set-point ``rate`` x
+    ``plan.flow_at(k + lead_n)`` (the step
     the nozzle will be on when the screw has followed), sent when it differs from the last
-    sent by more than FLOW_STEP x C and ``interval_n`` samples have passed since."""
+    sent by more than FLOW_STEP x ``rate`` and ``interval_n`` samples have passed since."""
 
     def __init__(self, plan: StreamPlan, rate: float, lead_n: int, end: int, interval_n: int,
                  start: int) -> None:
         self.plan, self.rate, self.lead_n, self.end = plan, rate, lead_n, end
         self.interval_n = max(int(interval_n), 1)
-        self.sent = rate  # the supervisor starts the extruder at C
+        self.sent = rate  # the supervisor starts the extruder at the job's set-point
         self.sent_k = start - self.interval_n
 
     def _target(self, k: int) -> float:
@@ -465,7 +468,9 @@ class RobotNode(LifecycleNode):
             return Reply.refuse(f"empty stream: start {start}, end {end}")
         after = int(cmd.arg("after_waypoint", -1))
         lead_s = float(cmd.arg("lead_s", 0.0))
-        rate = float(cmd.arg("rate", 6.57))
+        if cmd.arg("rate") is None:  # the job's set-point: the supervisor reads it from the job
+            return Reply.refuse("stream needs the job's extruder set-point (rate)")
+        rate = float(cmd.arg("rate"))
         full_guard = self._guard_factory(plan, start, lead_s)
 
         def guard(k: int) -> str:

@@ -23,8 +23,7 @@ class SlicerNode(LifecycleNode):
         self.fn = adapters.resolve(spec) if spec else adapters.slice_job
 
     def on_activate(self) -> None:
-        assert self.bus is not None
-        self.bus.serve(self._on_command)
+        self.serve(self._on_command)
 
     def _on_command(self, cmd: Command) -> Reply:
         if cmd.verb != "slice":
@@ -32,7 +31,9 @@ class SlicerNode(LifecycleNode):
         # Commands arrive one at a time on the bus worker thread: one job at a time.
         out = Path(cmd.arg("dir"))
         job_file = cmd.arg("job_file") or None
-        self.fn(Path(cmd.arg("model")), Path(job_file) if job_file else None, out)
+        cell_file = cmd.arg("cell_file") or None
+        self.fn(Path(cmd.arg("model")), Path(job_file) if job_file else None, out,
+                self.bus_config.cell, Path(cell_file) if cell_file else None)
         path = out / "toolpath.npz"
         if not path.is_file():
             return Reply.refuse(f"slicing wrote no {path}")

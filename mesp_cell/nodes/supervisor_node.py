@@ -13,6 +13,10 @@ checkpoint; ``resume`` restarts from it. A fresh print waits in ``ready_check`` 
 operator confirms the tank (``ready``); an abort retracts the nozzle along its axis and goes
 home on the robot's checked safe path. Commands (``supervisor/cmd``): ``pause``, ``resume``,
 ``abort``, ``ready`` (job_id); ``resume`` and ``ready`` are refused while an e-stop is latched.
+
+The extrusion rate C and the set-point the extruder is commanded come from the profile the job
+was sliced with (its ``profile.toml``); a job whose profile is not the cell's active
+calibration (``mesp profile``) is refused before it is planned and again before it moves.
 """
 
 from __future__ import annotations
@@ -39,7 +43,11 @@ from mesp_cell.messages import (
     WaypointReached,
 )
 from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
+from mesp_cell.profiles import stale_reason
+from mesp_cell.step_timeouts import plan_timeout, slice_timeout
 from slicer.errors import InputError
+from slicer.extrusion import ExtrusionProfile, load_job_profile
+from slicer.report import update_report
 
 log = logging.getLogger("mesp.supervisor")
 
@@ -54,7 +62,7 @@ class Stopped(Exception):
 
 
 class SupervisorNode(LifecycleNode):
-    """See the module docstring. Parameters: jobs_db, rate (mm^3/s), lead_s, prime_s, dt,
+    """See the module docstring. Parameters: jobs_db, lead_s, prime_s, dt,
     time_scale (of the twin and the emulated extruder: ETA, lead and prime waits), settle_s,
     robot/extruder/slicer/planner (node names), slice_timeout_s, plan_timeout_s, move_timeout_s,
     poll_s."""
@@ -63,7 +71,8 @@ class SupervisorNode(LifecycleNode):
         p = self.params
         self.store = JobStore(Path(p["jobs_db"]))
         self.cell = self.bus_config.cell
-        self.rate = float(p.get("rate", 6.57))
+        self.setpoint = 0.0  # mm^3/s the extruder is commanded for the current job
+        self.true_per_nominal = 1.0  # C / set-point of the current job's profile
         self.lead_s = float(p.get("lead_s", 0.3))
         self.prime_s = float(p.get("prime_s", 0.5))
         self.dt = float(p.get("dt", 0.002))
@@ -71,8 +80,9 @@ class SupervisorNode(LifecycleNode):
         self.time_scale = float(p.get("time_scale", 1.0))
         self.settle_s = float(p.get("settle_s", 0.05))  # wall s for a switch-on to show
         self.names = {k: p.get(k, k) for k in ("robot", "extruder", "slicer", "planner")}
-        self.timeouts = {"slice": float(p.get("slice_timeout_s", 3600.0)),
-                         "plan": float(p.get("plan_timeout_s", 3600.0)),
+        # 0 = sized to each job (mesp_cell.step_timeouts)
+        self.timeouts = {"slice": float(p.get("slice_timeout_s", 0.0)),
+                         "plan": float(p.get("plan_timeout_s", 0.0)),
                          "move": float(p.get("move_timeout_s", 120.0))}
         self.poll_s = float(p.get("poll_s", 0.1))
         self.alive: set[str] = set()
@@ -217,6 +227,7 @@ class SupervisorNode(LifecycleNode):
                 if job.state == "submitted":
                     self._stage(job, "slice", "sliced")
                 elif job.state == "sliced":
+                    self._job_profile(job)
                     self._stage(job, "plan", "planned")
                 elif job.state == "planned":
                     self.store.transition(job.id, "ready_check", READY_REASON, expect="planned")
@@ -261,23 +272,64 @@ class SupervisorNode(LifecycleNode):
         except InputError:  # aborted by the operator meanwhile: that state stands
             log.info("job %s not failed (%s): %s", job_id, self.store.get(job_id).state, reason)
 
+    def _job_profile(self, job: JobRecord) -> ExtrusionProfile:
+        """The profile ``job`` was sliced with, if it is the cell's active calibration."""
+        profile = load_job_profile(Path(job.dir))
+        why = stale_reason(profile, self.cell)
+        if why:
+            raise InputError(why, "re-submit the job to slice it with the active profile, or "
+                             f"`mesp profile activate {Path(job.dir) / 'profile.toml'} --on "
+                             f"{self.cell}`")
+        return profile
+
     def _stage(self, job: JobRecord, verb: str, next_state: str) -> None:
         node = self.names["slicer" if verb == "slice" else "planner"]
         if node not in self.alive:
             return
-        reply = self._request(node, Command.make(verb, job.id, model=job.model,
-                                                 job_file=job.job_file, cell_file=job.cell_file,
-                                                 dir=job.dir), self.timeouts[verb])
+        reply = self._request_while_alive(
+            node, Command.make(verb, job.id, model=job.model, job_file=job.job_file,
+                               cell_file=job.cell_file, dir=job.dir),
+            self._step_timeout(verb, job))
         if reply.ok:
             self.store.transition(job.id, next_state, expect=job.state)
         else:
             self.store.transition(job.id, "failed", f"{verb}: {reply.reason}")
+
+    def _request_while_alive(self, node: str, cmd: Command, timeout: float) -> Reply:
+        """``_request``, given up as soon as ``node`` leaves the bus (its process died or
+        stopped on a dead worker): the job fails at once instead of after ``timeout``."""
+        stopped = Reply.refuse(f"the {node} node stopped while working on the job (see its "
+                               "log; the launcher restarts it)")
+        box: list[Reply] = []
+        start = time.monotonic()
+        asker = threading.Thread(target=lambda: box.append(self._request(node, cmd, timeout)),
+                                 name=f"{self.name}-ask-{node}", daemon=True)
+        asker.start()
+        while asker.is_alive():
+            asker.join(0.1)
+            if asker.is_alive() and node not in self.alive:
+                return stopped
+        early = time.monotonic() - start < 0.9 * timeout
+        # a query dropped unanswered long before the timeout: the node's worker died with it
+        return stopped if early and not box[0].ok and "no reply" in box[0].reason else box[0]
+
+    def _step_timeout(self, verb: str, job: JobRecord) -> float:
+        """The launch's fixed timeout for ``verb`` if it sets one, else one sized to the job
+        (``mesp_cell.step_timeouts``; an unreadable model fails the job here)."""
+        if self.timeouts.get(verb):
+            return self.timeouts[verb]
+        if verb == "slice":
+            return slice_timeout(Path(job.model), Path(job.job_file) if job.job_file else None)
+        return plan_timeout(Path(job.dir))
 
     def _print(self, job: JobRecord) -> None:
         resume = job.state in ("paused", "interrupted")
         traj = Path(job.dir) / "trajectory.npz"
         if not traj.is_file():
             raise InputError(f"job {job.id} has no trajectory.npz", "re-submit the job")
+        profile = self._job_profile(job)
+        self.setpoint = profile.setpoint_mm3_s
+        self.true_per_nominal = profile.rate_mm3_s / profile.setpoint_mm3_s
         plan = StreamPlan.load(traj, self.dt)
         digest = sha256_of(traj)
         robot = self.names["robot"]
@@ -314,7 +366,7 @@ class SupervisorNode(LifecycleNode):
             self._extruder("clear")
             on = plan.extrude_at(min(start + lead_n, plan.samples - 1))
             if on:
-                self._extruder("start", rate=self.rate)
+                self._extruder("start", rate=self.setpoint)
                 # Lead and prime run on the extruder's (the twin's) clock; the switch-on must
                 # also show in the extruder state (wall-clock latency) before the stream starts.
                 wait = (self.lead_s + (0.0 if resume else self.prime_s)) / self.time_scale
@@ -326,7 +378,14 @@ class SupervisorNode(LifecycleNode):
             if ev.kind != "done":
                 raise Stopped(ev.reason or "stream stopped")
             self._move(job.id, to="home")
-            self.store.progress(job.id, 100.0, 0.0, self._volume(job, ext0))
+            volume = self._volume(job, ext0)
+            self.store.progress(job.id, 100.0, 0.0, volume)
+            update_report(Path(job.dir), {"print": {
+                "cell": self.cell, "volume_mm3": volume,
+                "profile": {"name": profile.name, "sha256": profile.sha256,
+                            "rate_mm3_s": profile.rate_mm3_s,
+                            "setpoint_mm3_s": profile.setpoint_mm3_s,
+                            "calibrated": profile.calibrated}}})
             self.store.transition(job.id, "done")
         except Stopped as exc:
             self._stopped(job, str(exc), ext0)
@@ -339,7 +398,7 @@ class SupervisorNode(LifecycleNode):
         """Stream samples ``start`` .. ``end`` - 1 (to the end by default) and follow it."""
         self._check_request()
         args: dict[str, Any] = {"start": start, "after_waypoint": after, "lead_s": self.lead_s,
-                                "rate": self.rate}
+                                "rate": self.setpoint}
         if end is not None:
             args["end"] = end
         reply = self._request(self.names["robot"], Command.make("stream", job.id, **args))
@@ -366,8 +425,10 @@ class SupervisorNode(LifecycleNode):
             log.warning("job %s stopped: %s", job.id, reason)
 
     def _volume(self, job: JobRecord, ext0: float) -> float:
+        """mm^3 extruded: the controller's totaliser (nominal) times the profile's C per
+        set-point (what weighing found it really delivers)."""
         now = self.extruder_state.volume if self.extruder_state else ext0
-        return job.volume + max(0.0, now - ext0)
+        return job.volume + max(0.0, now - ext0) * self.true_per_nominal
 
     def _drain(self, job_id: str) -> None:
         """Record the waypoints still queued (they may trail the stream's end event)."""

@@ -15,10 +15,12 @@ import shutil
 from pathlib import Path, PurePosixPath
 from typing import BinaryIO
 
-from mesp_cell.jobs import MODEL_SUFFIXES, check_submission
+from mesp_cell.jobs import check_submission
 from slicer.errors import InputError
+from slicer.mesh_io import SURFACE_SUFFIXES, TET_SUFFIXES
 
 CHUNK = 1 << 16
+MODEL_SUFFIXES = SURFACE_SUFFIXES + TET_SUFFIXES  # what the slicer reads
 
 
 class TooLarge(InputError):
@@ -73,6 +75,18 @@ def store_upload(root: Path, model: BinaryIO, model_name: str | None, job: Binar
                 job_path.unlink()
                 job_path = None
         check_submission(model_path, job_path)
+    except InputError as exc:
+        shutil.rmtree(folder, ignore_errors=True)
+        # the client's own names in the answer, not the cell's folders
+        named = {str(folder / p): n for p, n in (("job.toml", "the job file"),)}
+        named[str(model_path)] = f"model '{safe_stem(model_name)}{suffix}'"
+
+        def mask(text: str) -> str:
+            for path, name in named.items():
+                text = text.replace(f"model {path}", name).replace(path, name)
+            return text
+
+        raise type(exc)(mask(exc.problem), mask(exc.fix)) from exc
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
         raise

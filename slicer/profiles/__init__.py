@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from importlib import resources
 
+# The profile a fresh cell prints with until a lab activates its own (``mesp profile activate``).
+FACTORY = "ecoflex-0030"
+
 
 def bundled_names() -> list[str]:
     """Names of the bundled profiles (file stems), sorted."""

@@ -26,9 +26,9 @@ from scipy.spatial import cKDTree
 from slicer.stages import Layers, Toolpath
 from slicer.toolpath.linking import deposit_mask
 
-SAMPLES_PER_W2 = 12.0  # sample density relative to the layer's median width squared
-MAX_SAMPLES = 60_000  # per layer
-MIN_SAMPLES = 200  # per layer with any area
+SAMPLES_PER_W2 = 6.0  # sample density relative to the layer's median width squared
+MAX_SAMPLES = 4_000  # per layer: +-1 % per layer, far tighter over a pattern's layers
+MIN_SAMPLES = 400  # per layer with any area
 SAME_PASS = 2.0  # arc-length window (x W) inside which one path's segments are one pass
 SEED = 20_260_101
 
@@ -166,8 +166,10 @@ def _passes(n_points: int, i: NDArray[np.int64], j: NDArray[np.int64], seg: _Seg
     return count
 
 
-def layer_coverage(layers: Layers, tp: Toolpath) -> LayerCoverage:
-    """Gap and overlap of every layer of ``layers`` by the bands of ``tp``'s extruding segments."""
+def layer_coverage(layers: Layers, tp: Toolpath, samples_per_w2: float = SAMPLES_PER_W2,
+                   max_samples: int = MAX_SAMPLES) -> LayerCoverage:
+    """Gap and overlap of every layer of ``layers`` by the bands of ``tp``'s extruding segments
+    (sampled at ``samples_per_w2`` points per W^2, at most ``max_samples`` per layer)."""
     n_layers = int(layers.layer_count)
     area = np.zeros(n_layers)
     gap = np.zeros(n_layers)
@@ -197,8 +199,8 @@ def layer_coverage(layers: Layers, tp: Toolpath) -> LayerCoverage:
             continue
         pattern[k] = int(np.bincount(np.asarray(tp.pattern)[rows].astype(np.int64)).argmax())
         w_med = 2.0 * float(np.median(seg.half_width))
-        count = int(np.clip(SAMPLES_PER_W2 * area[k] / max(w_med, 1e-9) ** 2,
-                            MIN_SAMPLES, MAX_SAMPLES))
+        count = int(np.clip(samples_per_w2 * area[k] / max(w_med, 1e-9) ** 2,
+                            MIN_SAMPLES, max(max_samples, MIN_SAMPLES)))
         points, normal = _sample_layer(vertices, f, count, rng)
         i, j = _covered_pairs(points, normal, seg)
         passes = _passes(count, i, j, seg, SAME_PASS * w_med)

@@ -24,10 +24,11 @@ Measured (hemisphere job, ecoflex-0030, 0.25 mm voxels, `sim.deposition`): pores
 bulge (``fraction = 0.5``) was no better (0.194 mm).
 
 Along a path the moves change so little that no step leaves the plane normal to the
-printing direction by more than MAX_STEP_DEG: where one waypoint alone is exposed (a tread's
+printing direction by more than the cell's flush step limit (``AlphaRange.flush_step_deg``,
+14 deg for alpha in [70, 110]): where one waypoint alone is exposed (a tread's
 edge) its full move made the nozzle dive out of the layer and back (the aorta: 0.33 mm over a
 0.41 mm step, 56 deg out of that plane, beyond the planner's alpha range of 90 +- 20 deg, so
-the job was refused). Each step allows a change of move of L tan(MAX_STEP_DEG) less what the
+the job was refused). Each step allows a change of move of L tan(limit) less what the
 step itself already climbs (a layer curling at its edge: up to 22 deg on the membrane's dome);
 a move beyond that is cut back (the lower envelope; the filament there sticks out by the
 difference, counted in ``residual_mm``).
@@ -41,14 +42,12 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from slicer.alpha_range import AlphaRange
 from slicer.stages import TetMesh, Toolpath
 
 # Smallest cosine between the printing direction and the surface normal used to convert a
 # distance to the surface into a move along the printing direction (steeper: capped anyway).
 COS_MIN = 0.5
-# Largest angle of a step out of the plane normal to the printing direction that the moves
-# may cause (the planner keeps alpha within 90 +- 20 deg against both ends of a step).
-MAX_STEP_DEG = 14.0
 
 
 class FilamentModel(Protocol):
@@ -180,8 +179,8 @@ def limit_step_angle(move: NDArray[np.float64], points: NDArray[np.float64],
 
 
 def flush_toolpath(toolpath: Toolpath, tetmesh: TetMesh, model: FilamentModel,
-                   iterations: int = 4, min_move_mm: float = 1e-3, fraction: float = 1.0
-                   ) -> tuple[Toolpath, FlushReport]:
+                   iterations: int = 4, min_move_mm: float = 1e-3, fraction: float = 1.0,
+                   alpha: AlphaRange | None = None) -> tuple[Toolpath, FlushReport]:
     """Move extruding waypoints inwards so their filament does not stick out of the model.
 
     Args:
@@ -194,6 +193,8 @@ def flush_toolpath(toolpath: Toolpath, tetmesh: TetMesh, model: FilamentModel,
         fraction: float in [0, 1], scales the cap (h_f - H) / 2: 1 = the filament's extreme
             is flush (no ink outside the model before spreading); smaller values leave part
             of the bulge, for when the exposed filaments spread (0 = no move).
+        alpha: the cell's printing-angle range (None: the bundled cell's); it limits how
+            steep a step the moves may make (``AlphaRange.flush_step_deg``).
 
     Raises:
         ValueError: ``fraction`` outside [0, 1].
@@ -234,7 +235,8 @@ def flush_toolpath(toolpath: Toolpath, tetmesh: TetMesh, model: FilamentModel,
         active = active[still]
     both = (down > 0) & (up > 0)
     net = np.where(both, 0.5 * (up - down), up - down)
-    net = limit_step_angle(net, p, n, np.asarray(toolpath.path)[idx], MAX_STEP_DEG)
+    net = limit_step_angle(net, p, n, np.asarray(toolpath.path)[idx],
+                           (alpha or AlphaRange.bundled()).flush_step_deg)
     net = np.where(np.abs(net) >= min_move_mm, net, 0.0)
     position = toolpath.position.copy()
     position[idx] = p + net[:, None] * n

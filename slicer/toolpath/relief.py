@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from slicer.alpha_range import AlphaRange
 from slicer.stages import Toolpath
 from slicer.tolerance import tol
 
@@ -83,12 +84,13 @@ def step_elevation(toolpath: Toolpath, position: NDArray[np.float64] | None = No
             np.arcsin(np.clip(up_out, -1.0, 1.0)), l_in, l_out)
 
 
-def relieve_bends(toolpath: Toolpath, max_elevation_deg: float = 20.0, cap: float = 0.5
+def relieve_bends(toolpath: Toolpath, alpha: AlphaRange | None = None, cap: float = 0.5
                   ) -> tuple[Toolpath, BendRelief]:
     """``toolpath`` with the waypoints whose arriving or leaving step rises or falls more
-    than ``max_elevation_deg`` against the waypoint's printing direction moved towards their
-    neighbours' chord (module doc), each by at most ``cap`` x its H in all."""
-    limit = np.radians(max_elevation_deg)
+    than the cell's ``alpha.step_elevation_deg`` (None: the bundled cell's range) against the
+    waypoint's printing direction moved towards their neighbours' chord (module doc), each by
+    at most ``cap`` x its H in all."""
+    limit = np.radians((alpha or AlphaRange.bundled()).step_elevation_deg)
     p = np.array(toolpath.position, dtype=np.float64)
     n = toolpath.normal
     total = np.zeros(len(p))

@@ -63,13 +63,17 @@ def trajectory_arrays(n_waypoints: int, q_offset: float = 0.0) -> dict[str, np.n
             "base_T": np.eye(4), "tool_T": np.eye(4), "model_T": np.eye(4)}
 
 
-def slice_job(model: Path, job_file: Path | None, out_dir: Path) -> dict[str, Any]:
-    """Stands in for the slicing pipeline: refuses a missing model, writes toolpath.npz."""
+def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
+              cell_file: Path | None = None) -> dict[str, Any]:
+    """Stands in for the slicing pipeline: refuses a missing model, writes toolpath.npz and
+    records the cell's active extrusion profile."""
+    from mesp_cell.profiles import active
     from slicer.errors import InputError
 
     if not Path(model).is_file():
         raise InputError(f"model {model} does not exist", "check the path")
     toolpath().save(Path(out_dir))
+    active(cell).save_to_job(Path(out_dir))  # the cell's calibration, as the real slicer
     return {}
 
 
@@ -84,3 +88,28 @@ def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
         return adapters.plan_job(job_dir, cell_file)
     save_npz(Path(job_dir) / "trajectory.npz", trajectory_arrays(LAYERS * PER_LAYER))
     return {}
+
+
+def write_cube(path: Path, size_mm: float = 20.0) -> Path:
+    """A closed cube STL of ``size_mm`` (the model a submission loads and checks)."""
+    import trimesh
+
+    trimesh.creation.box(extents=[size_mm] * 3).export(path)
+    return path
+
+
+class WorkerKilled(BaseException):
+    """Not an Exception: nothing on the bus worker's way catches it, so its thread dies."""
+
+
+def slice_by_name(model: Path, job_file: Path | None, out_dir: Path, cell: str,
+                  cell_file: Path | None = None) -> dict[str, Any]:
+    """``slice_job``, except for a model named ``exits*`` (a library calling ``sys.exit``, as
+    meshio does on a garbage .vtu) or ``kills*`` (an error that kills the worker thread)."""
+    import sys
+
+    if Path(model).name.startswith("exits"):
+        sys.exit(1)
+    if Path(model).name.startswith("kills"):
+        raise WorkerKilled("the worker thread dies")
+    return slice_job(model, job_file, out_dir, cell, cell_file)

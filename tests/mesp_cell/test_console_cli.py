@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from mesp_cell.cli import main
+from tests.mesp_cell import synthetic
 
 
 def mesp(*args: str) -> int:
@@ -37,7 +38,7 @@ def wait_for(predicate, timeout: float = 20.0, what: object = "") -> None:  # ty
 def test_launch_submit_pause_resume_abort_and_ctrl_c(home: Path, tmp_path: Path,
                                                      capsys: pytest.CaptureFixture[str]) -> None:
     model = tmp_path / "ring.stl"
-    model.write_text("solid ring\nendsolid ring\n")
+    synthetic.write_cube(model)  # a real model: submit loads it
     # The launcher's stderr goes to a file: an unread pipe would block it once full.
     err_path = tmp_path / "launcher.err"
     err_file = err_path.open("wb")

@@ -19,7 +19,9 @@ import numpy as np
 import pytest
 
 from slicer.artifacts import save_npz
+from slicer.extrusion import ACTIVE, load_profile
 from slicer.stages import Toolpath
+from tests.mesp_cell import synthetic
 
 HOME = np.radians([0.0, -100.0, 100.0, -90.0, -90.0, 0.0])
 PATHS = 40          # deposition paths
@@ -29,7 +31,7 @@ STEP = 10           # trajectory samples per waypoint (0.1 s)
 RATE_HZ = 100.0     # trajectory sample rate
 TRAVEL = 25         # samples (0.25 s) of travel between paths
 TIME_SCALE = 40.0
-RATE = 6.57         # mm^3/s, the supervisor's rate in launch/sim.toml
+RATE = load_profile(ACTIVE).setpoint_mm3_s  # mm^3/s, a fresh cell's set-point (factory profile)
 
 
 def toolpath() -> Toolpath:
@@ -72,9 +74,13 @@ def deposition_s() -> float:
     return PATHS * PER_PATH * STEP / RATE_HZ
 
 
-def slice_job(model: Path, job_file: Path | None, out_dir: Path) -> dict[str, Any]:
+def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
+              cell_file: Path | None = None) -> dict[str, Any]:
     """Stands in for the slicing pipeline (launch override ``slice_fn``)."""
+    from mesp_cell.profiles import active
+
     toolpath().save(Path(out_dir))
+    active(cell).save_to_job(Path(out_dir))  # the cell's calibration, as the real slicer
     return {}
 
 
@@ -102,7 +108,7 @@ def test_short_paths_print_completely_at_high_time_scale(tmp_path: Path) -> None
     old = os.environ.get("MESP_HOME")
     os.environ["MESP_HOME"] = str(tmp_path / "home")
     model = tmp_path / "part.stl"
-    model.write_text("solid part\nendsolid part\n")
+    synthetic.write_cube(model)  # a real model: submit loads it
     lock = threading.Lock()
     waypoints: list[int] = []
     states: list[ExtruderState] = []

@@ -11,6 +11,7 @@ import pytest
 from mesp_cell.jobs import JobStore, check_submission
 from mesp_cell.launcher import CellClient
 from slicer.errors import InputError
+from tests.mesp_cell import synthetic
 
 
 @pytest.fixture
@@ -21,7 +22,7 @@ def store(tmp_path: Path) -> JobStore:
 @pytest.fixture
 def model(tmp_path: Path) -> Path:
     p = tmp_path / "My Part.stl"
-    p.write_text("solid x\nendsolid x\n")
+    synthetic.write_cube(p)  # a real model: submit loads it
     return p
 
 
@@ -176,3 +177,28 @@ def test_a_fresh_print_waits_in_ready_check_until_confirmed(store: JobStore, mod
     assert nxt is not None and nxt.id == third.id
     store.note(second.id, "a   note")
     assert store.history(second.id)[-1][1:] == ("aborted", "aborted", "a note")
+
+
+def test_job_ids_are_made_by_the_store_and_stay_in_its_folder(store: JobStore,
+                                                              tmp_path: Path) -> None:
+    import inspect
+
+    assert "job_id" not in inspect.signature(store.submit).parameters
+    odd = tmp_path / "..%2F..%2Fx .. ; rm -rf.stl"
+    synthetic.write_cube(odd)
+    job = store.submit(odd, "sim", tmp_path / "jobs")
+    assert Path(job.dir).resolve().parent == (tmp_path / "jobs").resolve()
+    assert all(c.isalnum() or c == "-" for c in job.id)
+
+
+def test_submission_refuses_what_the_slicer_cannot_read(tmp_path: Path) -> None:
+    import os
+
+    for name, body in (("a.off", b"OFF\n"), ("a.3mf", b"PK"), ("a.mesh", b"Mesh"),
+                       ("a.vtu", b"<?xml \x00\xff")):
+        (tmp_path / name).write_bytes(body)
+        with pytest.raises(InputError):
+            check_submission(tmp_path / name)
+    os.symlink("/etc/shadow", tmp_path / "shadow.stl")
+    with pytest.raises(InputError, match="outside its folder"):
+        check_submission(tmp_path / "shadow.stl")

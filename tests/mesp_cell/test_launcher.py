@@ -130,7 +130,7 @@ def test_slice_adapter_refuses_before_slicing(tmp_path: Path) -> None:
     from mesp_cell.nodes import adapters
 
     with pytest.raises(InputError, match="does not exist"):
-        adapters.slice_job(tmp_path / "none.stl", None, tmp_path / "out")
+        adapters.slice_job(tmp_path / "none.stl", None, tmp_path / "out", "sim")
     with pytest.raises(InputError, match="module:function"):
         adapters.resolve("no_colon")
     with pytest.raises(InputError, match="cannot load"):

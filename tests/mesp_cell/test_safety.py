@@ -84,7 +84,7 @@ def rec(client: CellClient) -> Recorder:
 @pytest.fixture
 def model(tmp_path: Path) -> Path:
     path = tmp_path / "ring.stl"
-    path.write_text("solid ring\nendsolid ring\n")
+    synthetic.write_cube(path)  # a real model: submit loads it
     return path
 
 

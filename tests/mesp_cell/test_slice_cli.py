@@ -80,6 +80,12 @@ def test_slice_writes_every_stage_and_design_report_keys(cube_job: Path) -> None
     assert report["model"]["volume_mm3"] == pytest.approx(8000.0, rel=1e-6)
     assert abs(report["toolpath"]["volume_error"]) < 0.02
     assert report["toolpath"]["waypoints"] == len(toolpath)
+    # the job records the profile it was sliced with (a fresh home: the factory profile)
+    from slicer.extrusion import load_job_profile
+
+    recorded = load_job_profile(cube_job)
+    assert report["toolpath"]["profile"]["sha256"] == recorded.sha256
+    assert report["toolpath"]["bend_relief"]["limit_deg"] == 20.0  # the bundled cell's range
 
 
 def test_slice_writes_exports_and_pictures(cube_job: Path) -> None:

@@ -50,9 +50,8 @@ def _wait_state(client: CellClient, job_id: str, state: str, timeout: float = 30
 
 
 def test_after_an_abort_the_next_job_waits_and_nothing_moves_until_confirmed(
-        cell: Launch, tmp_path: Path) -> None:
-    model = tmp_path / "ring.stl"
-    model.write_text("solid ring\nendsolid ring\n")
+        cell: Launch, ring: Path) -> None:
+    model = ring
     client = cell.client()
     states: list[RobotState] = []
     client.bus().subscribe("robot", "state", RobotState, states.append)
@@ -101,9 +100,8 @@ def test_after_an_abort_the_next_job_waits_and_nothing_moves_until_confirmed(
 
 
 def test_ready_and_resume_are_refused_while_the_estop_is_latched(cell: Launch,
-                                                                 tmp_path: Path) -> None:
-    model = tmp_path / "ring.stl"
-    model.write_text("solid ring\nendsolid ring\n")
+                                                                 ring: Path) -> None:
+    model = ring
     client = cell.client()
     try:
         job = client.submit(model)

@@ -49,3 +49,17 @@ def test_bad_values_name_the_key(tmp_path: Path, text: str, needle: str) -> None
 def test_missing_file_is_input_error(tmp_path: Path) -> None:
     with pytest.raises(InputError, match="does not exist"):
         load_cell(tmp_path / "nope.toml")
+
+
+def test_numbers_are_finite_and_within_the_cell_ranges(tmp_path: Path) -> None:
+    path = tmp_path / "cell.toml"
+    for text, needle in (("[tank]\nyaw_deg = nan\n", "yaw_deg' is nan"),
+                         ("[robot]\nbase_xyz_mm = [inf, 0.0, 0.0]\n", "finite"),
+                         ("[planning]\nmax_step_mm = 1e-6\n", r"outside 0\.05 to 100"),
+                         ("[planning]\nspin_steps = 100000000\n", "outside 4 to 720"),
+                         ("[[tool.parts]]\nname = \"x\"\nshape = \"box\"\n"
+                          "center_mm = [0.0, 0.0, 0.0]\nsize_mm = [1e9, 1.0, 1.0]\n",
+                          "size_mm")):
+        path.write_text(text)
+        with pytest.raises(InputError, match=needle):
+            load_cell(path)

@@ -110,3 +110,17 @@ def test_modal_coordinates_and_several_g_words_on_a_line() -> None:
     tp = parse_gcode("G21 G91 M83\nG1 Z0.2\nG1 X5 E1\nY5 E1\n", VOLUMETRIC)
     assert np.allclose(tp.position, [[0, 0, 0.2], [5, 0, 0.2], [5, 5, 0.2]])
     assert tp.path.tolist() == [0, 0, 0]
+
+
+def test_absurd_gcode_is_refused_by_line() -> None:
+    import pytest
+
+    from sim.gcode import parse_gcode
+    from slicer.errors import InputError
+
+    ok = "G21\nG90\nM83\nG1 Z0.3\nG1 X0 Y0\nG1 X4 Y0 E0.2\n"
+    for extra, needle in (("G1 X1e30 E0.2\n", "line 7: X1e\\+30"),
+                          ("G2 X4 Y1 I1e12 J0 E0.2\n", "I1e\\+12"),
+                          ("G1 X0 Y4 E1e30\n", "width")):
+        with pytest.raises(InputError, match=needle):
+            parse_gcode(ok + extra)

@@ -37,7 +37,7 @@ def test_job_file_overrides_defaults(tmp_path: Path) -> None:
         ("[slicing]\ncritical = ['sideways']\n", "not understood"),
         ("[toolpath]\nboundary_distance = 'exact'\n", "boundary_distance"),
         ("[toolpath]\ndeformation_tolerance = 0.5\n", "deformation_tolerance"),
-        ("[toolpath]\nmax_step_elevation_deg = 90\n", "max_step_elevation_deg"),
+        ("[toolpath]\nmax_step_elevation_deg = 20\n", "max_step_elevation_deg"),  # cell's now
         ("[slicing]\ncritical = ['bottom@q<1']\n", "condition '@q<1' is not understood"),
         ("[slicing]\ncritical = ['bottom@z<1e']\n", "bad number"),
     ],
@@ -88,3 +88,25 @@ def test_with_overrides_validates() -> None:
     assert job.with_overrides(mesh={"edge_length_mm": 2.0}).mesh.edge_length_mm == 2.0
     with pytest.raises(InputError):
         job.with_overrides(mesh={"edge_length_mm": -2.0})
+
+
+def test_every_number_is_finite_and_in_its_documented_range(tmp_path: Path) -> None:
+    from slicer.config import job_ranges
+
+    ranges = job_ranges()
+    defaults = load_job()
+    for key, (lo, hi) in ranges.items():  # the defaults lie within their ranges
+        section, name = key.split(".")
+        value = getattr(getattr(defaults, section), name)
+        if isinstance(value, int | float):
+            assert lo <= value <= hi, key
+    job = tmp_path / "job.toml"
+    job.write_text("[slicing]\nsmoothness_weight = nan\n")
+    with pytest.raises(InputError, match=r"smoothness_weight.*finite"):
+        load_job(job)
+    job.write_text("[slicing]\nlayer_height_mm = 0.01\n")
+    with pytest.raises(InputError, match=r"outside 0\.05 to 20.*ranges\.toml"):
+        load_job(job)
+    job.write_text("[extrusion]\nprofile = \"/etc/passwd\"\n")
+    with pytest.raises(InputError, match="profile"):
+        load_job(job)

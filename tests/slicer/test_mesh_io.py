@@ -212,3 +212,14 @@ def test_unreadable_tet_mesh(tmp_path: Path) -> None:
         load_tet_mesh(path)
     with pytest.raises(InputError, match="does not exist"):
         load_tet_mesh(tmp_path / "missing.msh")
+
+
+def test_a_model_file_too_large_is_refused_before_reading(tmp_path: Path,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    from slicer import mesh_io
+
+    path = tmp_path / "big.stl"
+    path.write_bytes(b"\0" * 2048)
+    monkeypatch.setattr(mesh_io, "MAX_MODEL_BYTES", 1024)
+    with pytest.raises(InputError, match="larger than"):
+        mesh_io.load_surface(path)

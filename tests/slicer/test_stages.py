@@ -94,3 +94,33 @@ def test_missing_or_corrupt_file_is_input_error(tmp_path: Path) -> None:
 def test_save_is_atomic_and_leaves_no_temp_files(tmp_path: Path) -> None:
     _tetmesh().save(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["tetmesh.npz"]
+
+
+def test_stage_files_are_readable_by_the_lab(tmp_path: Path) -> None:
+    from slicer.artifacts import atomic_write_bytes, save_npz
+
+    atomic_write_bytes(tmp_path / "report.json", b"{}")
+    save_npz(tmp_path / "a.npz", {"x": np.zeros(3)})
+    for name in ("report.json", "a.npz"):
+        assert (tmp_path / name).stat().st_mode & 0o777 == 0o644
+
+
+def test_a_loaded_toolpath_must_be_printable(tmp_path: Path) -> None:
+    from tests.fuzz.fixtures import toolpath_arrays
+
+    good = toolpath_arrays()
+    np.savez(tmp_path / Toolpath.FILE, **good)
+    assert len(Toolpath.load(tmp_path)) == len(good["position"])
+    for name, value, needle in (("position", np.nan, "NaN"), ("speed", 0.0, "speed"),
+                                ("speed", -5.0, "speed"), ("width", 1e9, "width"),
+                                ("extrude", False, "deposits nothing"),
+                                ("normal", 0.0, "unit"), ("layer", -1, "negative"),
+                                ("position", 1e7, "beyond")):
+        arrays = {k: v.copy() for k, v in good.items()}
+        arrays[name][:] = value
+        np.savez(tmp_path / Toolpath.FILE, **arrays)
+        with pytest.raises(InputError, match=needle):
+            Toolpath.load(tmp_path)
+    np.savez(tmp_path / Toolpath.FILE, **{k: v[:0] for k, v in good.items()})
+    with pytest.raises(InputError, match="no waypoint"):
+        Toolpath.load(tmp_path)

@@ -83,7 +83,8 @@ def test_bad_requests_answer_400_401_404_409_413_422(console: Console, ring: Pat
     r = console.post("/api/jobs", files={"model": ("part.docx", b"x")})
     assert r.status_code == 400 and "unsupported type '.docx'" in r.json()["detail"]
     r = console.post("/api/jobs", files={"model": ("../../etc/empty.stl", b"")})
-    assert r.status_code == 400 and "is empty" in r.json()["detail"]
+    assert r.status_code == 400 and "model 'empty.stl' is empty" in r.json()["detail"]
+    assert str(console.home) not in r.json()["detail"]  # the cell's folders stay private
     assert not list((console.home / "jobs" / "uploads").glob("*/*")), "a refused upload stayed"
     r = console.post("/api/jobs", files={"model": ("big.stl", b"x" * (1 << 20 | 1))})
     assert r.status_code == 413 and "larger than 1 MiB" in r.json()["detail"]

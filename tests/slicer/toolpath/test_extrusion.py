@@ -8,7 +8,14 @@ import numpy as np
 import pytest
 
 from slicer.errors import InputError
-from slicer.extrusion import ExtrusionProfile, load_profile, profile_from_dict
+from slicer.extrusion import (
+    ACTIVE,
+    PROFILE_FILE,
+    ExtrusionProfile,
+    load_job_profile,
+    load_profile,
+    profile_from_dict,
+)
 
 
 @pytest.fixture(scope="module")
@@ -64,7 +71,7 @@ def test_clamped_outside_table(eco: ExtrusionProfile) -> None:
 
 def _data(**changes: object) -> dict:
     data: dict = {
-        "name": "t", "rate_mm3_s": 6.57, "beta": 0.5,
+        "name": "t", "rate_mm3_s": 6.57, "setpoint_mm3_s": 6.0, "beta": 0.5,
         "morphology": {"speed_mm_s": [1.0, 2.0, 4.0], "filament_width_mm": [3.0, 2.0, 1.0],
                        "filament_height_mm": [2.0, 1.5, 1.0]},
     }
@@ -78,6 +85,7 @@ def _data(**changes: object) -> dict:
 
 @pytest.mark.parametrize("changes", [
     {"rate_mm3_s": -1.0},
+    {"setpoint_mm3_s": 0.0},
     {"beta": 1.5},
     {"speed_mm_s": [1.0, 1.0, 4.0]},
     {"filament_height_mm": [2.0, 2.5, 1.0]},
@@ -102,11 +110,12 @@ def test_good_custom_profile_and_missing_key() -> None:
 def test_load_by_path_and_errors(tmp_path: Path) -> None:
     path = tmp_path / "p.toml"
     path.write_text(
-        'rate_mm3_s = 5.0\nbeta = 0.6\n[morphology]\nspeed_mm_s = [1.0, 3.0]\n'
+        'rate_mm3_s = 5.0\nsetpoint_mm3_s = 4.5\nbeta = 0.6\n'
+        '[morphology]\nspeed_mm_s = [1.0, 3.0]\n'
         'filament_width_mm = [2.0, 1.0]\nfilament_height_mm = [1.5, 0.9]\n'
     )
     prof = load_profile(path)
-    assert prof.rate_mm3_s == 5.0 and prof.beta == 0.6
+    assert prof.rate_mm3_s == 5.0 and prof.beta == 0.6 and prof.setpoint_mm3_s == 4.5
     with pytest.raises(InputError, match="unknown extrusion profile"):
         load_profile("no-such-material")
     with pytest.raises(InputError):
@@ -115,3 +124,19 @@ def test_load_by_path_and_errors(tmp_path: Path) -> None:
     broken.write_text("rate_mm3_s = [")
     with pytest.raises(InputError, match="TOML"):
         load_profile(broken)
+
+
+def test_a_job_records_its_profile_verbatim(tmp_path: Path) -> None:
+    eco = load_profile("ecoflex-0030")
+    assert load_profile(ACTIVE).sha256 == eco.sha256  # no cell: the factory profile
+    eco.save_to_job(tmp_path)
+    assert (tmp_path / PROFILE_FILE).read_text() == eco.text
+    again = load_job_profile(tmp_path)
+    assert again.sha256 == eco.sha256 and again.rate_mm3_s == eco.rate_mm3_s
+    edited = tmp_path / "edited"
+    edited.mkdir()
+    (edited / PROFILE_FILE).write_text(eco.text.replace("setpoint_mm3_s = 6.57",
+                                                        "setpoint_mm3_s = 6.0"))
+    assert load_job_profile(edited).sha256 != eco.sha256  # any change is another calibration
+    with pytest.raises(InputError, match="records no extrusion profile"):
+        load_job_profile(tmp_path / "nothing")

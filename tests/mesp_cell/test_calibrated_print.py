@@ -1,0 +1,92 @@
+"""Recalibrate the emulated extruder at another true rate, then print on the twin.
+
+The whole cell runs (real processes, the real slicer and planner on the cube example, the
+emulated Modbus extruder whose true rate is ``GAIN`` x its set-point). After `mesp calibrate
+extrusion --activate`, a job sliced with the old profile is refused before it is planned or
+moves, and a job sliced with the new profile extrudes the toolpath's volume within 1 %, by the
+emulator's hidden truth (not by the totaliser, which believes the set-point).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import pytest
+
+from mesp_cell.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+GAIN = 1.08  # the emulated extruder delivers 8 % more than it is asked
+TIME_SCALE = 40.0
+
+
+def _truth(home: Path) -> float:
+    """The emulator's hidden delivered volume, mm^3 (its --truth file)."""
+    path = home / "run" / "sim.extruder-truth.json"
+    end = time.monotonic() + 10.0
+    while not path.is_file() and time.monotonic() < end:
+        time.sleep(0.1)
+    return float(json.loads(path.read_text())["true_volume_mm3"])
+
+
+@pytest.mark.timeout(600)
+def test_recalibrated_cell_refuses_a_stale_job_and_prints_the_toolpath_volume(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    from mesp_cell import profiles
+    from mesp_cell.launcher import start_cell
+    from slicer.profiles import FACTORY
+
+    home = tmp_path / "home"
+    monkeypatch.setenv("MESP_HOME", str(home))
+    old = profiles.active("sim")
+    assert old.name == FACTORY
+    assert main(["calibrate", "extrusion", "--emulate", str(GAIN), "--yes", "--time-scale",
+                 str(TIME_SCALE), "--seed", "7", "--name", "lab-2026", "--activate",
+                 "--on", "sim"]) == 0
+    new = profiles.active("sim")
+    true_rate = GAIN * new.setpoint_mm3_s
+    print(f"calibrated C {new.rate_mm3_s:.4f} mm^3/s, true {true_rate:.4f}: "
+          f"{new.rate_mm3_s / true_rate - 1:+.3%}")
+    assert new.name == "lab-2026" and new.calibrated
+    assert new.rate_mm3_s == pytest.approx(true_rate, rel=0.01)
+    job = (ROOT / "examples" / "cube.toml").read_text()
+    stale_job = tmp_path / "stale.toml"
+    stale_job.write_text(job + f'\n[extrusion]\nprofile = "{FACTORY}"\n')
+    cube = ROOT / "examples" / "cube.stl"
+    with start_cell(overrides={"time_scale": TIME_SCALE, "true_gain": GAIN,
+                               "prime_s": 0.5}) as cell:
+        client = cell.client()
+        try:
+            stale = client.submit(cube, stale_job)
+            fresh = client.submit(cube, ROOT / "examples" / "cube.toml")
+            refused = client.wait(stale.id, timeout=240)
+            before = _truth(home)
+            done = client.wait(fresh.id, timeout=400)
+            for _ in range(3):  # a loaded 2-core host may trip an interlock: resume, as a user
+                if done.state != "interrupted":
+                    break
+                print(f"resumed after: {done.reason}")
+                client.resume(fresh.id)
+                done = client.wait(fresh.id, timeout=400)
+            time.sleep(0.5)  # the emulator writes its truth every 0.2 s
+            after = _truth(home)
+        finally:
+            client.close()
+    assert refused.state == "failed" and refused.layers == 0, refused  # never planned, moved
+    assert f"'{FACTORY}'" in refused.reason and "lab-2026" in refused.reason
+    assert done.state == "done", done.reason
+    report = json.loads((Path(done.dir) / "report.json").read_text())
+    assert report["toolpath"]["profile"]["sha256"] == new.sha256
+    assert report["print"]["profile"]["name"] == "lab-2026"
+    toolpath = float(report["toolpath"]["deposited_volume_mm3"])
+    delivered = after - before
+    print(f"toolpath {toolpath:.1f} mm^3, delivered {delivered:.1f} mm^3 "
+          f"({delivered / toolpath - 1:+.3%}), reported {done.volume:.1f} mm^3 "
+          f"({done.volume / toolpath - 1:+.3%})")
+    assert delivered == pytest.approx(toolpath, rel=0.01)
+    assert done.volume == pytest.approx(toolpath, rel=0.01)
+    assert os.environ["MESP_HOME"] == str(home)
