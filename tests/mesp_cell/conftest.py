@@ -85,22 +85,23 @@ def console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
     launch_file = home / "sim.toml"
     launch_file.write_text(text.replace("[process.params.servo]\n",
                                         "[process.params.servo]\noverrun_s = 1.0\n", 1))
-    launch = start_cell(launch_file, overrides={"slice_fn": "tests.mesp_cell.synthetic:slice_job",
-                                   "plan_fn": "tests.mesp_cell.conftest:plan_at_home",
-                                   "prime_s": 0.1, "robot_backend": "twin",
-                                   "time_scale": 0.5, "console_port": "auto",
-                                   "console_max_upload_mb": 1})
+    try:  # the cell's processes take its home from the environment when they start
+        launch = start_cell(launch_file, overrides={
+            "slice_fn": "tests.mesp_cell.synthetic:slice_job",
+            "plan_fn": "tests.mesp_cell.conftest:plan_at_home", "prime_s": 0.1,
+            "robot_backend": "twin", "time_scale": 0.5, "console_port": "auto",
+            "console_max_upload_mb": 1})
+    finally:  # ... and other tests of the session do not see it
+        if old is None:
+            os.environ.pop("MESP_HOME", None)
+        else:
+            os.environ["MESP_HOME"] = old
     try:
         url = console_urls(launch.spec.processes)[0]
         with httpx.Client(base_url=url, timeout=10.0) as http:
             yield Console(launch, url, token, home, http)
     finally:
         launch.stop()
-        if old is None:
-            os.environ.pop("MESP_HOME", None)
-        else:
-            os.environ["MESP_HOME"] = old
-
 
 @pytest.fixture
 def ring(tmp_path: Path) -> Path:
