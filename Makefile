@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup demo test lint bench clean baselines
+.PHONY: setup demo test lint bench clean baselines browser
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,6 +20,8 @@ demo: $(STAMP)            ## set up, then run the main job on the bundled exampl
 test: $(STAMP)            ## set up, then run the whole test suite
 	@$(MAKE) --no-print-directory baselines || \
 		echo "make baselines failed: the PrusaSlicer baseline tests will skip"
+	@$(MAKE) --no-print-directory browser || \
+		echo "make browser failed: the console's browser tests will skip"
 	$(BIN)/python -m pytest -q
 
 # PrusaSlicer, the commercial planar slicer of `mesp inspect DIR --baseline prusaslicer`.
@@ -32,6 +34,18 @@ baselines:                ## install prusa-slicer when it is missing (Debian/Ubu
 			{ apt-get update && apt-get install -y --no-install-recommends prusa-slicer; }; \
 	else \
 		echo "prusa-slicer is missing: sudo apt-get install prusa-slicer (until then the PrusaSlicer baseline tests skip)"; \
+	fi
+
+# Chromium and its WebDriver, for the web console's browser tests (tests/mesp_cell/web).
+browser:                  ## install chromium + chromium-driver when missing (Debian, as root)
+	@if command -v chromium >/dev/null 2>&1 && command -v chromedriver >/dev/null 2>&1; then \
+		echo "chromium: $$(command -v chromium)"; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		export DEBIAN_FRONTEND=noninteractive; \
+		apt-get install -y --no-install-recommends chromium chromium-driver || \
+			{ apt-get update && apt-get install -y --no-install-recommends chromium chromium-driver; }; \
+	else \
+		echo "chromium is missing: sudo apt-get install chromium chromium-driver (until then the browser tests skip)"; \
 	fi
 
 lint: $(STAMP)

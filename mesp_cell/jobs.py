@@ -1,7 +1,10 @@
 """The job store: one SQLite file (WAL) shared by the console and the supervisor.
 
-States: submitted -> sliced -> planned -> printing -> done, with paused, interrupted (a node or
-link failed mid-print; resumable), failed (refused or a stage failed, with the reason) and aborted.
+States: submitted -> sliced -> planned -> ready_check -> printing -> done, with paused,
+interrupted (a node or link failed mid-print; resumable), failed (refused or a stage failed, with
+the reason) and aborted. A fresh print never starts on its own: the supervisor parks the next
+planned job in ``ready_check`` until the operator confirms the tank is ready (part removed, gel
+level; ``confirm_ready``), so no job prints into the gel the last one left behind.
 While printing, the supervisor writes a checkpoint (layer, waypoint, sample) of the last
 waypoint deposited with the extruder confirmed running; a resume restarts from that sample, so
 no waypoint is printed twice or skipped. Every transition is checked and recorded in ``events``.
@@ -20,14 +23,15 @@ from pathlib import Path
 from slicer.errors import InputError
 
 STATES = (
-    "submitted", "sliced", "planned", "printing", "paused", "interrupted", "done", "failed",
-    "aborted",
+    "submitted", "sliced", "planned", "ready_check", "printing", "paused", "interrupted", "done",
+    "failed", "aborted",
 )
 FINAL = frozenset({"done", "failed", "aborted"})
 TRANSITIONS: dict[str, frozenset[str]] = {
     "submitted": frozenset({"sliced", "failed", "aborted"}),
     "sliced": frozenset({"planned", "failed", "aborted"}),
-    "planned": frozenset({"printing", "failed", "aborted"}),
+    "planned": frozenset({"ready_check", "failed", "aborted"}),
+    "ready_check": frozenset({"printing", "failed", "aborted"}),
     "printing": frozenset({"paused", "interrupted", "done", "failed", "aborted"}),
     "paused": frozenset({"printing", "aborted", "failed"}),
     "interrupted": frozenset({"printing", "aborted", "failed"}),
@@ -45,7 +49,8 @@ CREATE TABLE IF NOT EXISTS jobs (
     sample INTEGER NOT NULL DEFAULT -1, layers INTEGER NOT NULL DEFAULT 0,
     waypoints INTEGER NOT NULL DEFAULT 0, samples INTEGER NOT NULL DEFAULT 0,
     percent REAL NOT NULL DEFAULT 0, eta_s REAL NOT NULL DEFAULT 0,
-    volume REAL NOT NULL DEFAULT 0, resume INTEGER NOT NULL DEFAULT 0
+    volume REAL NOT NULL DEFAULT 0, resume INTEGER NOT NULL DEFAULT 0,
+    ready INTEGER NOT NULL DEFAULT 0
 );
 CREATE TABLE IF NOT EXISTS events (
     job_id TEXT NOT NULL, t REAL NOT NULL, from_state TEXT NOT NULL, to_state TEXT NOT NULL,
@@ -68,6 +73,7 @@ class JobRecord:
         layers, waypoints, samples: sizes of the toolpath/trajectory (0 until planned).
         percent: 0..100 progress. eta_s: s to completion. volume: mm^3 extruded.
         resume: 1 when a resume was requested and not yet picked up.
+        ready: 1 when the operator confirmed the tank for this job in ``ready_check``.
     """
 
     id: str
@@ -90,6 +96,7 @@ class JobRecord:
     eta_s: float
     volume: float
     resume: int
+    ready: int
 
 
 _COLUMNS = ", ".join(f.name for f in fields(JobRecord))
@@ -106,6 +113,9 @@ class JobStore:
         self._db.execute("PRAGMA journal_mode=WAL")
         self._db.execute("PRAGMA synchronous=NORMAL")
         self._db.executescript(_SCHEMA)
+        cols = {r[1] for r in self._db.execute("PRAGMA table_info(jobs)")}
+        if "ready" not in cols:  # a store written before the tank-ready confirmation
+            self._db.execute("ALTER TABLE jobs ADD COLUMN ready INTEGER NOT NULL DEFAULT 0")
 
     def close(self) -> None:
         """Close the connection."""
@@ -142,13 +152,27 @@ class JobStore:
         return [JobRecord(*r) for r in rows]
 
     def next_pending(self, cell: str) -> JobRecord | None:
-        """The oldest job of ``cell`` the supervisor should work on next, or None."""
+        """The job of ``cell`` the supervisor should work on next, or None.
+
+        First a job that may print now (a resume requested, or the tank confirmed in
+        ``ready_check``), else the oldest to slice or plan, or the oldest planned one to park
+        in ``ready_check`` when no job waits there yet (one job waits for the operator at a
+        time, so a confirmation always names the job that will print) and no paused or
+        interrupted job holds the tank (its part is still in the gel).
+        """
         row = self._db.execute(
-            f"SELECT {_COLUMNS} FROM jobs WHERE cell = ? AND (state IN "
-            "('submitted','sliced','planned') OR (resume = 1 AND state IN "
-            "('paused','interrupted'))) ORDER BY created, id LIMIT 1",
-            (cell,),
+            f"SELECT {_COLUMNS} FROM jobs WHERE cell = ? AND ((resume = 1 AND state IN "
+            "('paused','interrupted')) OR (state = 'ready_check' AND ready = 1)) "
+            "ORDER BY created, id LIMIT 1", (cell,),
         ).fetchone()
+        if row is None:
+            row = self._db.execute(
+                f"SELECT {_COLUMNS} FROM jobs WHERE cell = ? AND (state IN ('submitted',"
+                "'sliced') OR (state = 'planned' AND NOT EXISTS (SELECT 1 FROM jobs WHERE "
+                "cell = ? AND state IN ('ready_check', 'paused', 'interrupted')))) "
+                "ORDER BY created, id LIMIT 1",
+                (cell, cell),
+            ).fetchone()
         return JobRecord(*row) if row else None
 
     def history(self, job_id: str) -> list[tuple[float, str, str, str]]:
@@ -216,8 +240,8 @@ class JobStore:
                 raise InputError(why, "see `mesp job status`")
             now = time.time()
             resume = 0 if new_state == "printing" else job.resume
-            db.execute("UPDATE jobs SET state = ?, reason = ?, updated = ?, resume = ? "
-                       "WHERE id = ?", (new_state, reason, now, resume, job_id))
+            db.execute("UPDATE jobs SET state = ?, reason = ?, updated = ?, resume = ?, "
+                       "ready = 0 WHERE id = ?", (new_state, reason, now, resume, job_id))
             db.execute("INSERT INTO events VALUES (?, ?, ?, ?, ?)",
                        (job_id, now, job.state, new_state, reason))
         return self.get(job_id)
@@ -232,6 +256,39 @@ class JobStore:
             db.execute("UPDATE jobs SET resume = 1, updated = ? WHERE id = ?",
                        (time.time(), job_id))
         return self.get(job_id)
+
+    def confirm_ready(self, job_id: str, who: str = "the operator") -> JobRecord:
+        """Record the operator's confirmation that the tank is ready for a job waiting in
+        ``ready_check``; any other state is refused with the reason."""
+        with self._tx() as db:
+            row = db.execute(f"SELECT {_COLUMNS} FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            if row is None:
+                raise InputError(f"no job '{job_id}'", "list the jobs with `mesp job list`")
+            job = JobRecord(*row)
+            if job.state != "ready_check":
+                raise InputError(f"job {job_id} is {job.state}; only a job waiting in "
+                                 "ready_check takes the tank-ready confirmation",
+                                 "confirm it when the cell asks (`mesp job list`)")
+            now = time.time()
+            db.execute("UPDATE jobs SET ready = 1, updated = ? WHERE id = ?", (now, job_id))
+            db.execute("INSERT INTO events VALUES (?, ?, 'ready_check', 'ready_check', ?)",
+                       (job_id, now, f"tank confirmed ready by {who}"))
+        return self.get(job_id)
+
+    def unconfirm_all(self, cell: str) -> None:
+        """Forget the confirmations of a previous session (the first job of a session needs
+        its own)."""
+        with self._tx() as db:
+            db.execute("UPDATE jobs SET ready = 0 WHERE cell = ? AND state = 'ready_check'",
+                       (cell,))
+
+    def note(self, job_id: str, text: str) -> None:
+        """Record ``text`` in the job's history without changing its state."""
+        with self._tx() as db:
+            row = db.execute("SELECT state FROM jobs WHERE id = ?", (job_id,)).fetchone()
+            if row is not None:
+                db.execute("INSERT INTO events VALUES (?, ?, ?, ?, ?)",
+                           (job_id, time.time(), row[0], row[0], " ".join(text.split())))
 
     def set_sizes(self, job_id: str, layers: int, waypoints: int, samples: int) -> None:
         """Record the toolpath/trajectory sizes once planned."""

@@ -544,15 +544,30 @@ class CellClient:
             job = self.store.get(job_id)
         return job
 
-    def command(self, verb: str, job_id: str) -> Reply:
-        """pause | resume | abort a job through the supervisor."""
+    def command(self, verb: str, job_id: str, **args: Any) -> Reply:
+        """pause | resume | abort | ready (tank confirmed) a job through the supervisor."""
         self.store.get(job_id)  # an unknown id is an InputError before touching the bus
-        return self.bus().request("supervisor", Command.make(verb, job_id), 5.0)
+        return self.bus().request("supervisor", Command.make(verb, job_id, **args), 5.0)
 
-    def estop(self, reason: str = "operator") -> None:
-        """Publish an e-stop to every node of the cell."""
-        self.bus().publish_to("estop", "estop", EStop(f"console-{os.getpid()}", reason,
-                                                      time.time()))
+    def confirm_ready(self, job_id: str, timeout: float = 30.0,
+                      who: str = "the operator") -> JobRecord:
+        """Wait until the job waits in ``ready_check`` (it slices and plans first), then
+        confirm the tank is ready. A refusal (e-stop latched, job ended) is an InputError."""
+        end = time.monotonic() + timeout
+        job = self.store.get(job_id)
+        while job.state in ("submitted", "sliced", "planned") and time.monotonic() < end:
+            time.sleep(0.05)
+            job = self.store.get(job_id)
+        reply = self.command("ready", job_id, who=who)
+        if not reply.ok:
+            raise InputError(reply.reason, "see `mesp job status`")
+        return self.store.get(job_id)
+
+    def estop(self, reason: str = "operator") -> float:
+        """Publish an e-stop to every node of the cell; returns when it was sent (s)."""
+        t = time.time()
+        self.bus().publish_to("estop", "estop", EStop(f"console-{os.getpid()}", reason, t))
+        return t
 
     def reset_estop(self) -> list[str]:
         """Clear latched e-stops; returns the nodes that did not confirm."""

@@ -46,6 +46,9 @@ def register(sub: Any) -> None:
         help="the twin runs this many times faster than real time (default 40)",
     )
     p.add_argument("--no-inspect", action="store_true", help="skip the virtual print")
+    p.add_argument("--console", action="store_true",
+                   help="leave the tank-ready confirmation to the operator in the web console "
+                   "and keep the cell and its console running after the job until Ctrl-C")
     p.add_argument("--timeout", type=float, default=900.0,
                    help="give up after this many s without progress (default 900)")
     p.set_defaults(func=run)
@@ -96,10 +99,23 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(exc), exc.fix) from exc
     with cell:
         say.line(f"cell up in {time.monotonic() - t0:.1f} s: {', '.join(sorted(cell.alive))}")
+        from mesp_cell.web.node import console_urls
+
+        urls = console_urls(cell.spec.processes)
+        for url in urls:
+            say.line(f"console: {url}")
         client = cell.client()
         try:
             job = client.submit(model, job_file=job_file, cell_file=cell_file)
             say.line(f"submitted job {job.id}")
+            if args.console and urls:
+                say.line(f"job {job.id} waits for the tank-ready confirmation: press 'Tank "
+                         f"ready' in the console ({urls[0]})")
+                client.wait(job.id, timeout=1e9, until=frozenset(
+                    {"printing", "paused", "interrupted", "done", "failed", "aborted"}))
+            else:
+                client.confirm_ready(job.id, timeout=args.timeout, who="mesp demo")
+                say.line("tank confirmed ready (the twin's tank is virtual)")
             try:
                 done = client.wait(job.id, on_progress=say.progress, timeout=args.timeout,
                                    idle=True)
@@ -107,6 +123,11 @@ def run(args: argparse.Namespace) -> int:
                 say.end_progress()
                 raise InputError(str(exc), f"give it longer (--timeout; cell logs in "
                                  f"{home / 'logs'})") from exc
+            if args.console and urls:
+                say.end_progress()
+                say.line(f"job {done.id} {done.state}; the console stays open at {urls[0]}: "
+                         "Ctrl-C stops the cell")
+                _hold(cell)
         finally:
             client.close()
     say.end_progress()
@@ -125,6 +146,22 @@ def run(args: argparse.Namespace) -> int:
         _inspect(job_dir)
     _summary(job_dir, say.printing_s(), args.time_scale)
     return 0
+
+
+def _hold(cell: Any) -> None:
+    """Keep the cell (and its console) running until Ctrl-C (or SIGTERM) or a critical
+    failure."""
+    import signal
+
+    # installed explicitly: a process started in the background by a non-interactive shell
+    # inherits SIGINT ignored
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.default_int_handler)
+    try:
+        while not cell.failed:
+            time.sleep(0.5)
+    except KeyboardInterrupt:
+        print(file=sys.stderr)
 
 
 #: The extruded volume may differ from the toolpath's by the lead and the priming purge; beyond
@@ -248,8 +285,10 @@ class _Printer:
 
     def progress(self, job: Any) -> None:
         text = f"  {job.state:<9} layer {job.layer + 1}/{job.layers}  {job.percent:5.1f}%"
-        if job.eta_s and job.eta_s > 0:
-            text += f"  ETA {job.eta_s:5.0f} s"
+        if job.state == "printing" and job.eta_s > 0:
+            from mesp_cell.commands.job import hmm
+
+            text += f"  ETA {hmm(job.eta_s)}"
         text += f"  {job.volume:8.0f} mm^3"
         now = time.monotonic()
         if job.state in ("printing", "done"):

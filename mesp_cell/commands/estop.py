@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import time
 
 from slicer.errors import InputError
 
@@ -13,7 +12,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "estop", help="emergency stop: robot and extruder stop at once",
         description="Publish an e-stop on the cell bus: the robot node stops its stream "
         "(servoStop) and the extruder node stops the motor and latches the e-stop fault. The "
-        "printing job becomes 'interrupted'. Nothing moves again until `mesp estop --reset`. "
+        "printing job becomes 'interrupted'. It then prints what stopped and when (a node that "
+        "does not confirm within 2 s is an error). Nothing moves again until `mesp estop --reset`. "
         "This is a software stop; it does not replace the cell's hardware e-stop circuit.")
     p.add_argument("--reason", default="operator", help="text recorded with the stop")
     p.add_argument("--reset", action="store_true", help="clear a latched e-stop instead")
@@ -33,9 +33,16 @@ def run(args: argparse.Namespace) -> int:
                                  "check that the cell is running (`mesp launch`)")
             print("e-stop cleared")
             return 0
-        client.estop(args.reason)
-        time.sleep(0.05)  # let the message leave before the session closes
-        print(f"e-stop sent to cell '{client.cell}'")
+        from mesp_cell.estop_check import confirm_estop
+
+        printing = tuple(j.id for j in client.store.query(client.cell, ("printing",)))
+        sent = client.estop(args.reason)
+        done = confirm_estop(client.bus(), client.store, client.cell, sent, printing)
+        for text in done.lines():
+            print(text)
+        if not done.confirmed:
+            raise InputError("the e-stop was not confirmed by every node",
+                             "use the cell's hardware e-stop now")
     finally:
         client.close()
     return 0

@@ -1,4 +1,4 @@
-"""`mesp job ...`: submit, list, status, pause, resume, abort print jobs."""
+"""`mesp job ...`: submit, list, status, history, ready, pause, resume, abort print jobs."""
 
 from __future__ import annotations
 
@@ -13,7 +13,8 @@ from slicer.errors import InputError
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser(
-        "job", help="operator commands: submit, list, status, pause, resume, abort",
+        "job", help="operator commands: submit, list, status, history, ready, pause, resume, "
+        "abort",
         description="Queue print jobs on a running cell and follow or control them. The job "
         "store is $MESP_HOME/jobs.sqlite (default ~/.mesp).")
     p.add_argument("--on", metavar="CELL", default=None,
@@ -33,6 +34,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     st.add_argument("job_id")
     st.add_argument("--follow", "-f", action="store_true", help="update until the job stops")
     st.set_defaults(func=status)
+    h = sub.add_parser("history", help="a job's events: every state change and note, with times")
+    h.add_argument("job_id")
+    h.set_defaults(func=history)
+    r = sub.add_parser("ready", help="confirm the tank is ready (part removed, gel level) for "
+                       "the job waiting in ready_check; it then starts printing")
+    r.add_argument("job_id")
+    r.set_defaults(func=ready)
     for verb, text in (("pause", "pause a printing job (resumable)"),
                        ("resume", "resume a paused or interrupted job from its checkpoint"),
                        ("abort", "abort a job (not resumable)")):
@@ -47,13 +55,23 @@ def _client(args: argparse.Namespace):  # type: ignore[no-untyped-def]
     return CellClient.for_cell(args.on)
 
 
+def hmm(seconds: float) -> str:
+    """``h:mm`` of a duration (rounded up to the minute: an ETA never promises too early)."""
+    minutes = int(-(-max(seconds, 0.0) // 60))
+    return f"{minutes // 60}:{minutes % 60:02d}"
+
+
 def line(job: JobRecord) -> str:
-    """One status line: state, layer, percent, ETA, volume, reason."""
+    """One status line: state, layer, percent, ETA (h:mm and the finish time while printing),
+    volume, reason."""
     text = f"{job.id:<20} {job.state:<11}"
     if job.samples:
         layer = f"{job.layer + 1}/{job.layers}" if job.layer >= 0 else f"-/{job.layers}"
-        text += (f" layer {layer:>7}  {job.percent:5.1f}%  ETA {job.eta_s:6.1f} s  "
-                 f"{job.volume:8.1f} mm^3")
+        text += f" layer {layer:>7}  {job.percent:5.1f}%"
+        if job.state == "printing" and job.eta_s > 0:
+            finish = time.strftime("%H:%M", time.localtime(time.time() + job.eta_s))
+            text += f"  ETA {hmm(job.eta_s)} (done ~{finish})"
+        text += f"  {job.volume:8.1f} mm^3"
     if job.reason:
         text += f"  ({job.reason})"
     return text
@@ -137,13 +155,45 @@ def status(args: argparse.Namespace) -> int:
     return 0
 
 
+def history(args: argparse.Namespace) -> int:
+    client = _client(args)
+    try:
+        client.status(args.job_id)
+        for t, old, new, reason in client.store.history(args.job_id):
+            stamp = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(t))
+            change = new if old in ("", new) else f"{old} -> {new}"
+            print(f"{stamp}  {change:<24}{'  ' + reason if reason else ''}")
+    finally:
+        client.close()
+    return 0
+
+
+def ready(args: argparse.Namespace) -> int:
+    client = _client(args)
+    try:
+        job = client.status(args.job_id)
+        if job.state != "ready_check":
+            raise InputError(f"job {job.id} is {job.state}, not waiting for the tank-ready "
+                             "confirmation", "confirm a job `mesp job list` shows in ready_check")
+        if not client.running:
+            raise InputError(f"cell '{client.cell}' is not running",
+                             "start it with `mesp launch sim`")
+        reply = client.command("ready", job.id, who="the operator (mesp job ready)")
+        if not reply.ok:
+            raise InputError(reply.reason, "see `mesp job status`")
+        print(f"{job.id}: tank confirmed ready; the job starts printing")
+    finally:
+        client.close()
+    return 0
+
+
 def control(args: argparse.Namespace) -> int:
     client = _client(args)
     try:
         job = client.status(args.job_id)
         if not client.running:
-            if args.verb == "abort" and job.state in ("submitted", "sliced", "planned", "paused",
-                                                      "interrupted"):
+            if args.verb == "abort" and job.state in ("submitted", "sliced", "planned",
+                                                      "ready_check", "paused", "interrupted"):
                 client.store.transition(job.id, "aborted", "aborted by the operator")
                 print(f"{job.id} aborted")
                 return 0

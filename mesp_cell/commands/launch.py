@@ -67,6 +67,10 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(str(exc), exc.fix) from exc
     say(f"cell '{spec.cell}' running (bus hub {spec.hub}); logs in {launch.log_dir}; "
         "Ctrl-C stops it")
+    from mesp_cell.web.node import console_urls
+
+    for url in console_urls(spec.processes):
+        say(f"console: {url}")
     # Ctrl-C and SIGTERM both stop the cell cleanly. Installed explicitly: a process started
     # in the background by a non-interactive shell inherits SIGINT *ignored*, and Python then
     # never raises KeyboardInterrupt.

@@ -13,7 +13,8 @@ the arm's planned speed, ``lead_s`` ahead (``set_rate`` to the set-point x
 ``StreamPlan.flow_at``, when it moves by more than FLOW_STEP of it, at most every
 FLOW_INTERVAL_S of wall time), so the ink per millimetre stays the slicer's where the planner
 slowed the arm (``sync_flow``, default on);
-``stop``; ``reset`` clears a latched e-stop.
+``stop``; ``reset`` clears a latched e-stop; ``status`` answers the latched e-stop (reason,
+time), the motion mode and the last stream's stop.
 Motions run in one motion thread; their end is published as a ``StreamEvent`` on
 ``robot/event``. Interlocks, checked before every servo sample: no e-stop,
 the extruder and supervisor processes present, and the extruder running (fresh state) wherever
@@ -230,6 +231,7 @@ class RobotNode(LifecycleNode):
         self.state_period = 1.0 / float(p.get("state_hz", 100.0))
         self.alive: set[str] = set()
         self.estopped = ""
+        self.estop_t = 0.0  # s since the epoch of the latched e-stop
         self.plan: StreamPlan | None = None
         self.job_id = ""
         self.stream: ServoStream | None = None
@@ -288,6 +290,7 @@ class RobotNode(LifecycleNode):
 
     def _on_estop(self, msg: EStop) -> None:
         self.estopped = f"e-stop from {msg.source}" + (f": {msg.reason}" if msg.reason else "")
+        self.estop_t = time.time()
         self._halt(self.estopped)
 
     def _halt(self, reason: str) -> None:
@@ -342,6 +345,10 @@ class RobotNode(LifecycleNode):
         if verb == "reset":
             self.estopped = ""
             return Reply.done()
+        if verb == "status":
+            return Reply.done(estopped=self.estopped, estop_t=self.estop_t, mode=self.mode,
+                              job_id=self.job_id, stop_reason=self.stop_reason,
+                              stop_t=self.stop_t, waypoint=self.waypoint)
         if verb == "load":
             if self._busy():
                 return Reply.refuse("robot is busy; stop it first")

@@ -9,8 +9,10 @@ sample, prime and start extrusion ``lead_s`` ahead of deposition
 switches the extruder ``lead_s`` ahead of every change of ``extrude``, on the servo clock),
 record a checkpoint at every deposited waypoint, publish progress, stop the extruder, park.
 A stream that stops early (node lost, fault, e-stop) leaves the job ``interrupted`` with its
-checkpoint; ``resume`` restarts from it. Commands (``supervisor/cmd``): ``pause``,
-``resume``, ``abort`` (job_id).
+checkpoint; ``resume`` restarts from it. A fresh print waits in ``ready_check`` until the
+operator confirms the tank (``ready``); an abort retracts the nozzle along its axis and goes
+home on the robot's checked safe path. Commands (``supervisor/cmd``): ``pause``, ``resume``,
+``abort``, ``ready`` (job_id); ``resume`` and ``ready`` are refused while an e-stop is latched.
 
 The extrusion rate C and the set-point the extruder is commanded come from the profile the job
 was sliced with (its ``profile.toml``); a job whose profile is not the cell's active
@@ -31,6 +33,7 @@ from typing import Any
 from mesp_cell.drivers.stream import StreamPlan, sha256_of
 from mesp_cell.jobs import JobRecord, JobStore
 from mesp_cell.messages import (
+    FAULT_ESTOP,
     Command,
     ExtruderState,
     JobProgress,
@@ -47,6 +50,11 @@ from slicer.extrusion import ExtrusionProfile, load_job_profile
 from slicer.report import update_report
 
 log = logging.getLogger("mesp.supervisor")
+
+
+#: The reason a planned job waits in ``ready_check`` (shown by ``mesp job list`` and the console).
+READY_REASON = ("waits for the operator: remove the last part, check the gel level, then "
+                "confirm the tank is ready")
 
 
 class Stopped(Exception):
@@ -84,9 +92,11 @@ class SupervisorNode(LifecycleNode):
         self.extruder_state: ExtruderState | None = None
         self.current = ""
         self.request = ""  # "pause" | "abort" for the current job
+        self.park = ""  # an aborted job whose nozzle the work loop retracts and parks home
         self._lock = threading.Lock()
         for job in self.store.query(self.cell, ("printing",)):
             self.store.transition(job.id, "interrupted", "supervisor restarted mid-print")
+        self.store.unconfirm_all(self.cell)  # a new session confirms its first job itself
 
     def on_activate(self) -> None:
         assert self.bus is not None
@@ -117,11 +127,34 @@ class SupervisorNode(LifecycleNode):
     def _on_presence(self, node: str, alive: bool) -> None:
         (self.alive.add if alive else self.alive.discard)(node)
 
+    def _estop_latched(self) -> str:
+        """Why motion cannot start now because of a latched e-stop ("" if none)."""
+        asked = time.time()
+        reply = self._request(self.names["robot"], Command.make("status"), 2.0)
+        why = str(reply.value("estopped", "")) if reply.ok else ""
+        # the extruder's latch as of a state sent after the question (a reset just
+        # confirmed shows in the next state, 10 ms later)
+        end = time.monotonic() + 0.5
+        while (self.extruder_state is not None and self.extruder_state.t < asked
+               and time.monotonic() < end):
+            time.sleep(0.01)
+        ext = self.extruder_state
+        if not why and ext is not None and ext.fault & FAULT_ESTOP:
+            why = "extruder e-stop latched"
+        return why
+
     def _on_command(self, cmd: Command) -> Reply:
         job = self.store.get(cmd.job_id)
         if job.cell != self.cell:
             return Reply.refuse(f"job {job.id} belongs to cell '{job.cell}', not '{self.cell}'")
-        if cmd.verb == "resume":
+        if cmd.verb in ("resume", "ready"):
+            latched = self._estop_latched()
+            if latched:
+                return Reply.refuse(f"cannot {cmd.verb} job {job.id}: {latched}; clear it with "
+                                    "`mesp estop --reset` once the cell is safe")
+            if cmd.verb == "ready":
+                self.store.confirm_ready(job.id, cmd.arg("who", "the operator"))
+                return Reply.done(state="ready_check")
             self.store.request_resume(job.id)
             return Reply.done(state=job.state)
         if cmd.verb in ("pause", "abort"):
@@ -134,6 +167,9 @@ class SupervisorNode(LifecycleNode):
                 why = self.store.check_transition(job, "paused")
                 return Reply.refuse(why or f"job {job.id} is not printing")
             self.store.transition(job.id, "aborted", "aborted by the operator")
+            if job.state in ("paused", "interrupted"):
+                with self._lock:  # its nozzle may still be in the gel
+                    self.park = job.id
             return Reply.done()
         return Reply.refuse(f"unknown supervisor command '{cmd.verb}'")
 
@@ -182,6 +218,8 @@ class SupervisorNode(LifecycleNode):
     def _work(self) -> None:
         waiting_logged = ""
         while not self.stopping.wait(self.poll_s):
+            if self.park:
+                self._park()
             job = self.store.next_pending(self.cell)
             if job is None:
                 continue
@@ -191,6 +229,9 @@ class SupervisorNode(LifecycleNode):
                 elif job.state == "sliced":
                     self._job_profile(job)
                     self._stage(job, "plan", "planned")
+                elif job.state == "planned":
+                    self.store.transition(job.id, "ready_check", READY_REASON, expect="planned")
+                    log.info("job %s waits for the operator to confirm the tank", job.id)
                 else:
                     why = self._need("robot", "extruder")
                     if why:
@@ -204,6 +245,26 @@ class SupervisorNode(LifecycleNode):
             except Exception as exc:  # a bug must fail the job visibly, not kill the loop
                 log.exception("job %s", job.id)
                 self._fail(job.id, f"{type(exc).__name__}: {exc}")
+
+    def _park(self) -> None:
+        """Retract the aborted job's nozzle along its axis out of the gel and go home."""
+        with self._lock:
+            job_id, self.park = self.park, ""
+        self.store.note(job_id, self._retract(job_id))
+
+    def _retract(self, job_id: str) -> str:
+        """Move home on the robot's checked safe path (retract along the nozzle axis, transfer
+        above the gel); returns what happened, for the job's history."""
+        reply = self._request(self.names["robot"], Command.make("move", job_id, to="home"))
+        if not reply.ok:
+            return f"nozzle not retracted: {reply.reason}"
+        try:
+            ev = self._wait_event(job_id, self.timeouts["move"])
+        except Stopped as exc:
+            return f"nozzle not retracted: {exc}"
+        if ev.kind != "moved":
+            return f"nozzle not retracted: {ev.reason or 'move interrupted'}"
+        return "nozzle retracted along its axis out of the gel and parked at home"
 
     def _fail(self, job_id: str, reason: str) -> None:
         try:
@@ -356,8 +417,9 @@ class SupervisorNode(LifecycleNode):
             req = self.request
             if req == "pause":
                 self.store.transition(job.id, "paused", "paused by the operator")
-            elif req == "abort":
-                self.store.transition(job.id, "aborted", "aborted by the operator")
+            elif req == "abort":  # aborted once out of the gel (or why it could not be)
+                self.store.transition(job.id, "aborted",
+                                      f"aborted by the operator; {self._retract(job.id)}")
             else:
                 self.store.transition(job.id, "interrupted", reason)
             log.warning("job %s stopped: %s", job.id, reason)

@@ -58,6 +58,9 @@ def test_launch_submit_pause_resume_abort_and_ctrl_c(home: Path, tmp_path: Path,
         capsys.readouterr()
         assert mesp("job", "submit", str(model)) == 0
         job_id = capsys.readouterr().out.split()[1]
+        wait_for(lambda: client.status(job_id).state == "ready_check",
+                 what=lambda: client.status(job_id))
+        assert mesp("job", "ready", job_id) == 0
         wait_for(lambda: client.status(job_id).percent > 20, what=lambda: client.status(job_id))
         assert mesp("job", "pause", job_id) == 0
         wait_for(lambda: client.status(job_id).state == "paused")
@@ -86,7 +89,11 @@ def test_launch_submit_pause_resume_abort_and_ctrl_c(home: Path, tmp_path: Path,
 
         states: list[ExtruderState] = []
         client.bus().subscribe("extruder", "state", ExtruderState, states.append)
+        capsys.readouterr()
         assert mesp("estop", "--reason", "console test") == 0
+        said = capsys.readouterr().out
+        assert "robot: stopped and latched at" in said and "console test" in said, said
+        assert "extruder: motor off, e-stop latched" in said, said
         wait_for(lambda: bool(states) and bool(states[-1].fault & 0x8))
         assert mesp("estop", "--reset") == 0
         wait_for(lambda: states[-1].fault == 0)
@@ -107,3 +114,23 @@ def test_launch_submit_pause_resume_abort_and_ctrl_c(home: Path, tmp_path: Path,
     assert not (home / "run" / "sim.json").exists()
     logs = list((home / "logs" / "sim").glob("*/robot.log"))
     assert logs and "robot active" in logs[0].read_text()
+
+
+def test_status_line_gives_the_eta_as_hours_and_minutes(tmp_path: Path) -> None:
+    from mesp_cell.commands.job import hmm, line
+    from mesp_cell.jobs import JobStore
+
+    assert (hmm(106_000), hmm(59), hmm(0), hmm(3600)) == ("29:27", "0:01", "0:00", "1:00")
+    store = JobStore(tmp_path / "jobs.sqlite")
+    model = tmp_path / "part.stl"
+    model.write_text("solid p\nendsolid p\n")
+    job = store.submit(model, "sim", tmp_path / "jobs")
+    for state in ("sliced", "planned", "ready_check", "printing"):
+        store.transition(job.id, state)
+    store.set_sizes(job.id, 10, 100, 1000)
+    store.progress(job.id, 12.5, 106_000.0, 3.0)
+    printing = line(store.get(job.id))
+    assert "ETA 29:27 (done ~" in printing and "s " not in printing.split("ETA")[1][:12]
+    store.transition(job.id, "paused")
+    assert "ETA" not in line(store.get(job.id))  # no "ETA 0.0 s" while paused
+    store.close()

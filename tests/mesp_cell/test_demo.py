@@ -132,6 +132,7 @@ def test_short_paths_print_completely_at_high_time_scale(tmp_path: Path) -> None
                 bus.subscribe("robot", "waypoint", WaypointReached, on_wp)
                 bus.subscribe("extruder", "state", ExtruderState, on_ext)
                 job = client.submit(model)
+                client.confirm_ready(job.id)
                 done = client.wait(job.id, timeout=90)
                 end = time.monotonic() + 2.0  # waypoint events may trail the job's end
                 while time.monotonic() < end and len(waypoints) < PATHS * PER_PATH:

@@ -29,10 +29,12 @@ def model(tmp_path: Path) -> Path:
 def test_lifecycle_and_history(store: JobStore, model: Path, tmp_path: Path) -> None:
     job = store.submit(model, "sim", tmp_path / "jobs")
     assert job.id == "my-part-0001" and job.state == "submitted" and Path(job.dir).is_dir()
-    for state in ("sliced", "planned", "printing", "interrupted", "printing", "done"):
+    for state in ("sliced", "planned", "ready_check", "printing", "interrupted", "printing",
+                  "done"):
         store.transition(job.id, state)
     assert [to for _, _, to, _ in store.history(job.id)] == [
-        "submitted", "sliced", "planned", "printing", "interrupted", "printing", "done"]
+        "submitted", "sliced", "planned", "ready_check", "printing", "interrupted", "printing",
+        "done"]
 
 
 def test_invalid_transitions_are_refused_with_the_reason(store: JobStore, model: Path,
@@ -54,7 +56,7 @@ def test_invalid_transitions_are_refused_with_the_reason(store: JobStore, model:
 def test_checkpoint_only_moves_forward_and_resume_flag(store: JobStore, model: Path,
                                                       tmp_path: Path) -> None:
     job = store.submit(model, "sim", tmp_path / "jobs")
-    for state in ("sliced", "planned", "printing"):
+    for state in ("sliced", "planned", "ready_check", "printing"):
         store.transition(job.id, state)
     store.checkpoint(job.id, 1, 30, 600)
     store.checkpoint(job.id, 0, 10, 200)  # a late, older event must not move it back
@@ -104,7 +106,7 @@ def test_waiting_without_progress_times_out_but_a_print_that_advances_does_not(
 
     def printing() -> str:
         job = client.submit(model)
-        for state in ("sliced", "planned", "printing"):
+        for state in ("sliced", "planned", "ready_check", "printing"):
             client.store.transition(job.id, state)
         return job.id
 
@@ -135,6 +137,46 @@ def test_waiting_without_progress_times_out_but_a_print_that_advances_does_not(
     worker.join()
     assert done.state == "done" and done.waypoint == 23
     client.close()
+
+
+def test_a_fresh_print_waits_in_ready_check_until_confirmed(store: JobStore, model: Path,
+                                                            tmp_path: Path) -> None:
+    first = store.submit(model, "sim", tmp_path / "jobs")
+    second = store.submit(model, "sim", tmp_path / "jobs")
+    for job in (first, second):
+        store.transition(job.id, "sliced")
+        store.transition(job.id, "planned")
+    with pytest.raises(InputError, match="planned; it can become only"):
+        store.transition(first.id, "printing")  # never straight from planned
+    with pytest.raises(InputError, match="only a job waiting in ready_check"):
+        store.confirm_ready(first.id)
+    nxt = store.next_pending("sim")
+    assert nxt is not None and nxt.id == first.id
+    store.transition(first.id, "ready_check")
+    # one job waits for the operator at a time: the second is not parked, nothing prints
+    assert store.next_pending("sim") is None
+    store.confirm_ready(first.id, "test")
+    nxt = store.next_pending("sim")
+    assert nxt is not None and (nxt.id, nxt.state, nxt.ready) == (first.id, "ready_check", 1)
+    assert store.transition(first.id, "printing").ready == 0
+    assert store.history(first.id)[-2][3] == "tank confirmed ready by test"
+    nxt = store.next_pending("sim")  # the first prints; the second may now wait for the tank
+    assert nxt is not None and nxt.id == second.id and nxt.state == "planned"
+    store.transition(second.id, "ready_check")
+    store.confirm_ready(second.id)
+    store.unconfirm_all("sim")  # a new session: the old confirmation does not count
+    assert store.next_pending("sim") is None
+    store.transition(second.id, "printing")
+    store.transition(second.id, "paused")  # a paused job holds the tank: nothing else parks
+    third = store.submit(model, "sim", tmp_path / "jobs")
+    store.transition(third.id, "sliced")
+    store.transition(third.id, "planned")
+    assert store.next_pending("sim") is None
+    store.transition(second.id, "aborted")
+    nxt = store.next_pending("sim")
+    assert nxt is not None and nxt.id == third.id
+    store.note(second.id, "a   note")
+    assert store.history(second.id)[-1][1:] == ("aborted", "aborted", "a note")
 
 
 def test_job_ids_are_made_by_the_store_and_stay_in_its_folder(store: JobStore,

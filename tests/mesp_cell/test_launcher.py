@@ -17,15 +17,20 @@ def test_bundled_launch_files_parse(monkeypatch: pytest.MonkeyPatch, tmp_path: P
     monkeypatch.setenv("MESP_HOME", str(tmp_path))
     sim = load_launch(bundled_launch("sim"))
     assert [p.name for p in sim.processes] == [
-        "extruder-emulator", "extruder", "robot", "slicer", "planner", "supervisor"]
+        "extruder-emulator", "extruder", "robot", "slicer", "planner", "supervisor", "console"]
     port = sim.vars["extruder_port"]
     assert isinstance(port, int) and port > 0
     ext = next(p for p in sim.processes if p.name == "extruder")
     assert ext.params is not None and ext.params["port"] == port  # typed substitution
     emu = sim.processes[0]
     assert emu.args[:2] == ("--port", str(port))
-    sup = sim.processes[-1]
+    sup = sim.processes[-2]
     assert sup.params is not None and sup.params["jobs_db"] == f"{tmp_path}/jobs.sqlite"
+    for spec in (sim, load_launch(bundled_launch("cell"))):  # both serve the web console
+        con = spec.processes[-1]
+        assert con.module == "mesp_cell.web.node" and con.params is not None
+        assert con.params["host"] == "127.0.0.1" and not con.critical
+        assert con.params["jobs_db"] == f"{tmp_path}/jobs.sqlite"
     assert sim.hub.startswith("tcp/127.0.0.1:") and not sim.hub.endswith("auto")
     cell = load_launch(bundled_launch("cell"), {"robot_host": "10.0.0.2"})
     robot = next(p for p in cell.processes if p.name == "robot")

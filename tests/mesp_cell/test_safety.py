@@ -94,7 +94,8 @@ def wait_percent(client: CellClient, job_id: str, percent: float) -> None:
         job = client.status(job_id)
         if job.state == "printing" and job.percent >= percent:
             return
-        assert job.state in ("submitted", "sliced", "planned", "printing"), job.reason
+        assert job.state in ("submitted", "sliced", "planned", "ready_check", "printing"), \
+            job.reason
         time.sleep(0.02)
     raise AssertionError("the print did not progress")
 
@@ -114,6 +115,7 @@ def resume_and_finish(cell: Launch, client: CellClient, rec: Recorder, job_id: s
 
 def test_small_print_completes(client: CellClient, rec: Recorder, model: Path) -> None:
     job = client.submit(model)
+    client.confirm_ready(job.id)
     done = client.wait(job.id, timeout=30)
     assert done.state == "done", done.reason
     assert sorted(rec.waypoints.get(job.id, [])) == sorted(ALL_WAYPOINTS), done
@@ -122,12 +124,14 @@ def test_small_print_completes(client: CellClient, rec: Recorder, model: Path) -
     # Constant rate C over ~2.4 s of deposition plus priming: the totaliser saw it.
     assert 5.0 < done.volume < 6.57 * 6, done
     history = [to for _, _, to, _ in client.store.history(job.id)]
-    assert history == ["submitted", "sliced", "planned", "printing", "done"], history
+    assert history == ["submitted", "sliced", "planned", "ready_check", "ready_check",
+                       "printing", "done"], history
 
 
 def test_killing_extruder_stops_robot_and_resume_completes(
         cell: Launch, client: CellClient, rec: Recorder, model: Path) -> None:
     job = client.submit(model)
+    client.confirm_ready(job.id)
     wait_percent(client, job.id, 35.0)
     t_kill = time.time()
     os.kill(cell.pid("extruder"), signal.SIGKILL)
@@ -148,6 +152,7 @@ def test_killing_extruder_stops_robot_and_resume_completes(
 def test_killing_robot_stops_extruder(cell: Launch, client: CellClient, rec: Recorder,
                                       model: Path) -> None:
     job = client.submit(model)
+    client.confirm_ready(job.id)
     wait_percent(client, job.id, 35.0)
     t_kill = time.time()
     os.kill(cell.pid("robot"), signal.SIGKILL)
@@ -161,6 +166,7 @@ def test_killing_robot_stops_extruder(cell: Launch, client: CellClient, rec: Rec
 
 def test_estop_stops_both(cell: Launch, client: CellClient, rec: Recorder, model: Path) -> None:
     job = client.submit(model)
+    client.confirm_ready(job.id)
     wait_percent(client, job.id, 30.0)
     client.estop("test")
     stopped = client.wait(job.id, timeout=10)
@@ -170,10 +176,17 @@ def test_estop_stops_both(cell: Launch, client: CellClient, rec: Recorder, model
         last = rec.extruder[-1][1]
     assert not last.running and last.fault & FAULT_ESTOP
     assert rec.robot is not None and rec.robot.mode != "streaming"
-    # Nothing moves while the e-stop is latched; after the reset the job finishes.
-    client.resume(job.id)
-    refused = client.wait(job.id, timeout=10)
-    assert refused.state == "interrupted" and "e-stop" in refused.reason
+    # A resume while the e-stop is latched is refused with the reason; nothing moves; after
+    # the reset the job finishes.
+    seq = rec.robot.seq
+    q = rec.robot.q
+    with pytest.raises(InputError, match=r"cannot resume .*e-stop.*mesp estop --reset") as err:
+        client.resume(job.id)
+    assert "\n" not in err.value.one_line()
+    time.sleep(0.5)
+    refused = client.status(job.id)
+    assert refused.state == "interrupted" and not refused.resume
+    assert rec.robot.seq > seq and rec.robot.q == pytest.approx(q, abs=1e-6)
     assert client.reset_estop() == []
     resume_and_finish(cell, client, rec, job.id, "robot")
 
@@ -181,6 +194,7 @@ def test_estop_stops_both(cell: Launch, client: CellClient, rec: Recorder, model
 def test_modbus_disconnect_fails_safe(cell: Launch, client: CellClient, rec: Recorder,
                                       model: Path) -> None:
     job = client.submit(model)
+    client.confirm_ready(job.id)
     wait_percent(client, job.id, 30.0)
     injector = ModbusExtruder("127.0.0.1", int(cell.spec.vars["extruder_port"]))
     t_inject = time.monotonic()
