@@ -24,8 +24,9 @@ collisions demand, leaned about the direction of motion up to lean_max_deg, whic
 or tilted within [70, 110] deg, the smallest deviation first), solves the joint motion by
 damped-least-squares differential kinematics and times it within the joint velocity and
 acceleration limits at the toolpath speed. Writes DIR/trajectory.npz, the "plan" section of
-DIR/report.json and figures/plan_*.png. The cell (robot base, tool, tank, gel, limits) is the
-bundled default (planner/cells/default.toml) overridden by --cell.
+DIR/report.json, figures/plan_*.png and DIR/preview.html (`mesp preview`). The cell (robot
+base, tool, tank, gel, limits) is the bundled default (planner/cells/default.toml) overridden
+by --cell.
 """
 
 
@@ -81,9 +82,12 @@ def run(args: argparse.Namespace) -> int:
     report = dict(result.report)
     if not args.no_figures:
         from planner.plots import write_plan_figures
+        from sim.preview import write_preview
 
         figures = write_plan_figures(result, job_dir / "figures")
         report["figures"] = [str(p.relative_to(job_dir)) for p in figures]
+        report["preview"] = write_preview(toolpath, job_dir / "preview.html",
+                                          result.trajectory).name
     if args.render:
         from sim.render import render_png
         from sim.twin import Twin

@@ -50,3 +50,11 @@ def test_missing_stage_and_refused_plan_are_one_line_errors(
     assert main(["export", str(tmp_path), "--format", "urscript",
                  "--rate-full-scale", "1"]) == 2
     assert "--rate-full-scale" in capsys.readouterr().err
+
+
+def test_preview_command_writes_html(job: Path, tmp_path: Path,
+                                     capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["preview", str(job)]) == 0
+    assert (job / "preview.html").stat().st_size > 1_000_000
+    assert main(["preview", str(tmp_path)]) == 2
+    assert "mesp slice" in capsys.readouterr().err
