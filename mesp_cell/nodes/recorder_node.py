@@ -61,6 +61,10 @@ class RecorderNode(LifecycleNode):
         self._writer = self.spawn(self._write_loop, "writer")
 
     def _queue(self, msg: Any) -> None:
+        # between prints the 100 Hz states need no writer (a job's first state opens it)
+        if self.recorder is None and (isinstance(msg, ExtruderState) or (
+                isinstance(msg, RobotState) and not msg.job_id)):
+            return
         try:
             self.inbox.put_nowait(msg)
         except queue.Full:  # the writer is far behind: drop rather than block the bus
