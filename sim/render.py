@@ -35,10 +35,19 @@ class RenderResult:
     message: str
 
 
-def render_xml(twin: Twin) -> str:
-    """The twin's MJCF with a sky and a headlight added (the kinematics unchanged)."""
+def render_xml(twin: Twin, part: tuple[np.ndarray, np.ndarray] | None = None) -> str:
+    """The twin's MJCF with a sky and a headlight added (the kinematics unchanged), and the
+    part as a faint ghost: ``part`` = (vertices (V, 3) float64 m in the world, faces (F, 3))."""
     xml = twin.xml.replace("<visual>", "<visual>" + HEADLIGHT, 1)
-    return xml.replace("<worldbody>", SKY + "\n  <worldbody>", 1)
+    asset, ghost = SKY, ""
+    if part is not None and len(part[1]):
+        verts = " ".join(f"{v:.6g}" for v in np.asarray(part[0], float).ravel())
+        faces = " ".join(str(int(i)) for i in np.asarray(part[1]).ravel())
+        asset = SKY.replace("</asset>", f'<mesh name="part" vertex="{verts}" face="{faces}" '
+                            'inertia="shell"/></asset>')
+        ghost = ('\n    <geom name="part_ghost" type="mesh" mesh="part" contype="0" '
+                 'conaffinity="0" group="2" rgba="0.95 0.95 0.9 0.18"/>')
+    return xml.replace("<worldbody>", asset + "\n  <worldbody>" + ghost, 1)
 
 
 class Scene:
@@ -49,16 +58,17 @@ class Scene:
     """
 
     def __init__(self, twin: Twin, width: int, height: int, max_geom: int = 10000,
-                 fast: bool = False) -> None:
+                 fast: bool = False, part: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         self.twin = twin
-        self.model = mujoco.MjModel.from_xml_string(render_xml(twin))
+        self.model = mujoco.MjModel.from_xml_string(render_xml(twin, part))
         if fast:  # coarser round geoms, for thousands of ink capsules in software GL
             self.model.vis.quality.numslices = 12
             self.model.vis.quality.numstacks = 3
         self.model.vis.global_.offwidth = max(width, self.model.vis.global_.offwidth)
         self.model.vis.global_.offheight = max(height, self.model.vis.global_.offheight)
         # see-through environment (tank walls, gel) fainter, so the part and the ink show
-        faint = (self.model.geom_bodyid == 0) & (self.model.geom_rgba[:, 3] < 1.0)
+        faint = ((self.model.geom_bodyid == 0) & (self.model.geom_rgba[:, 3] < 1.0)
+                 & (self.model.geom_group != 2))
         self.model.geom_rgba[faint, 3] *= 0.4
         self.data = mujoco.MjData(self.model)
         self.width, self.height = width, height
@@ -106,13 +116,14 @@ class Scene:
 
 
 def open_scene(twin: Twin, width: int, height: int, max_geom: int = 10000,
-               fast: bool = False) -> tuple[Scene | None, str]:
+               fast: bool = False, part: tuple[np.ndarray, np.ndarray] | None = None
+               ) -> tuple[Scene | None, str]:
     """A Scene, or None and the reason rendering is unavailable here."""
     if GL_PROBLEM:
         return None, (f"offscreen rendering unavailable: {GL_PROBLEM}; install that backend "
                       "(libegl1 or libosmesa6)")
     try:
-        return Scene(twin, width, height, max_geom, fast), ""
+        return Scene(twin, width, height, max_geom, fast, part), ""
     except Exception as exc:  # any GL failure means "no rendering here", never a crash
         import os
 

@@ -1,13 +1,14 @@
 """Dry-run video of a planned job: the twin replaying ``trajectory.npz`` with the ink laid so far.
 
 Frames are taken every ``speedup / fps`` seconds of the print. Each shows the cell from a
-camera framing the part, the ink of every extruding toolpath segment finished by then (capsules
-of the target width, coloured by layer), a caption (print time, layer, clearance) and a
-timeline strip of the whole print with its marked moments: red where the arm and tool come
-closer than ``low_clearance_mm`` to the cell, orange where the arm moves an extruding segment
-slower than ``SLOWED`` x its toolpath speed (``planner.flow.segment_speeds``); the caption turns
-the same colour while such a moment is within the frame's interval. Written as H.264 MP4
-through imageio-ffmpeg, with a contact sheet PNG of evenly spaced frames.
+camera framing the part (its surface a faint ghost, when given), the ink of every extruding
+toolpath segment finished by then (capsules of the target width, coloured by layer), a
+caption (print time, layer, clearance) and a timeline strip of the whole print with its
+marked moments: red where the arm and tool come closer than ``low_clearance_mm`` to the
+cell, orange where the arm moves an extruding segment slower than ``SLOWED`` x its toolpath
+speed (``planner.flow.segment_speeds``); the caption turns the same colour while such a moment
+is within the frame's interval. Written as H.264 MP4 through imageio-ffmpeg, with a contact
+sheet PNG of evenly spaced frames.
 """
 
 from __future__ import annotations
@@ -178,10 +179,13 @@ def _clock(seconds: float) -> str:
 def render_video(twin: Twin, traj: Trajectory, toolpath: Toolpath, path: Path, *,
                  speedup: float = 60.0, fps: float = 24.0, width: int = 640, height: int = 480,
                  clearance: NDArray[np.float64] | None = None, low_clearance_mm: float = 5.0,
-                 max_frames: int | None = None, sheet: Path | None = None) -> VideoResult:
+                 max_frames: int | None = None, sheet: Path | None = None,
+                 part: tuple[np.ndarray, np.ndarray] | None = None) -> VideoResult:
     """Render the dry run of ``traj`` to ``path`` (MP4) and a contact sheet (see module doc).
 
     clearance: (M,) float64, mm, per trajectory sample (``PlanResult.clearance``), or None.
+    part: the model's surface (vertices (V, 3) float64 mm in the model frame, faces (F, 3)),
+    drawn as a faint ghost, or None.
     width and height are rounded up to multiples of 16 (what H.264 encoders expect).
     """
     import imageio.v2 as imageio
@@ -189,7 +193,12 @@ def render_video(twin: Twin, traj: Trajectory, toolpath: Toolpath, path: Path, *
     width, height = 16 * -(-width // 16), 16 * -(-height // 16)
     start = time.perf_counter()
     ink = ink_segments(toolpath, traj)
-    scene, why = open_scene(twin, width, height, max_geom=len(ink.done_t) + 1000, fast=True)
+    ghost = None
+    if part is not None:
+        M = np.asarray(traj.base_T) @ np.asarray(traj.model_T)
+        ghost = ((np.asarray(part[0]) @ M[:3, :3].T + M[:3, 3]) / 1000.0, np.asarray(part[1]))
+    scene, why = open_scene(twin, width, height, max_geom=len(ink.done_t) + 1000, fast=True,
+                            part=ghost)
     if scene is None:
         return VideoResult(None, None, 0, width, height, 0.0, traj.duration_s, why)
     frames_t = frame_times(traj.duration_s, speedup, fps, max_frames)
@@ -270,7 +279,7 @@ def contact_sheet(frames: list[tuple[float, NDArray[np.uint8], str]], path: Path
                         Patch(color=orange, label=f"arm below {SLOWED:.0%} of the "
                               "toolpath speed while extruding"),
                         Patch(color="white", label="ink coloured by layer (viridis: first "
-                              "dark, last yellow)")],
+                              "dark, last yellow); faint white: the part's surface")],
                loc="lower center", ncol=3, fontsize=9, facecolor="0.9")
     fig.suptitle("dry run on the twin: contact sheet (title coloured where a moment is marked "
                  "since the frame before)")

@@ -145,6 +145,8 @@ def _size(text: str) -> tuple[int, int]:
 def _video(job_dir: Path, cell: Any, result: Any, toolpath: Any, speedup: float,
            size: tuple[int, int], progress: ConsoleProgress) -> dict[str, Any]:
     """Render the dry-run video; its report entry (or why it was skipped)."""
+    import numpy as np
+
     from sim.twin import Twin
     from sim.video import render_video
 
@@ -154,9 +156,16 @@ def _video(job_dir: Path, cell: Any, result: Any, toolpath: Any, speedup: float,
     speedup = speedup or max(1.0, traj.duration_s / 40.0)
     required = float(result.report["required_clearance_mm"])
     progress.info(f"rendering the dry run at x{speedup:g} ...")
+    part = None
+    if (job_dir / "model.ply").is_file():  # the surface mesp slice sliced, model frame
+        import trimesh
+
+        mesh: Any = trimesh.load(job_dir / "model.ply", force="mesh")
+        part = (np.asarray(mesh.vertices), np.asarray(mesh.faces))
     video = render_video(Twin(cell), traj, toolpath, job_dir / "figures" / "dry_run.mp4",
                          speedup=speedup, width=size[0], height=size[1],
-                         clearance=result.clearance, low_clearance_mm=max(5.0, 2 * required))
+                         clearance=result.clearance, low_clearance_mm=max(5.0, 2 * required),
+                         part=part)
     if video.path is None:
         progress.info(f"video skipped: {video.message}")
         return {"skipped": video.message}

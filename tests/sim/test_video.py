@@ -53,9 +53,12 @@ def test_video_has_the_frames_and_size_asked_and_decodes(
     import imageio.v2 as imageio
 
     tp, result = job
+    import trimesh
+
+    box = trimesh.creation.box(extents=[30.0, 10.0, 5.0])  # the part's ghost, model frame
     out = render_video(Twin(load_cell()), result.trajectory, tp, tmp_path / "dry.mp4",
                        speedup=5.0, fps=4.0, width=160, height=120, max_frames=6,
-                       clearance=result.clearance)
+                       clearance=result.clearance, part=(box.vertices, box.faces))
     if out.path is None:
         assert "MUJOCO_GL" in out.message or "libegl1" in out.message
         pytest.skip(out.message)
