@@ -46,6 +46,31 @@ def test_messages_read_back_with_schemas_and_tracking_error(tmp_path: Path) -> N
     assert meta["mesp"]["dropped_over_size_cap"] == "0"
 
 
+KINDS = {"number": (int, float), "integer": (int,), "boolean": (bool,), "string": (str,),
+         "array": (list,)}
+
+
+def test_every_message_matches_its_channel_schema(tmp_path: Path) -> None:
+    """What Foxglove checks to decode a json channel: the fields its JSON schema declares."""
+    from mcap.reader import make_reader
+
+    rec = JobRecorder(tmp_path / "s.mcap", np.zeros((3, 3)), record_hz=0)
+    rec.record(_robot(5.0, 1, (1.0, 2.0, 3.0)))
+    rec.record(_extruder(5.0))
+    rec.record(StreamEvent("j1", "done", "", 2, 5.1))
+    rec.record_plan(np.arange(3.0), np.zeros((3, 6)), np.zeros((3, 3)), np.ones(3, bool), 5.0)
+    rec.close()
+    with (tmp_path / "s.mcap").open("rb") as f:
+        for schema, _channel, message in make_reader(f).iter_messages():
+            props = json.loads(schema.data)["properties"]
+            data = json.loads(message.data)
+            assert set(data) == set(props), schema.name
+            for key, value in data.items():
+                kind = props[key]["type"]
+                assert isinstance(value, KINDS[kind]), (schema.name, key)
+                assert kind == "boolean" or not isinstance(value, bool), (schema.name, key)
+
+
 def test_rate_and_size_bounds(tmp_path: Path) -> None:
     rec = JobRecorder(tmp_path / "r.mcap", None, record_hz=10)
     kept = sum(rec.record(_robot(0.001 * k, -1, (0.0, 0.0, 0.0))) for k in range(1000))
