@@ -96,9 +96,9 @@ def _polyline(idx: NDArray[np.intp], toolpath: Toolpath, mask: NDArray[np.bool_]
 
 def _coords(toolpath: Toolpath, line: NDArray[np.intp]) -> list[list[float | None]]:
     """x, y, z lists (None at gaps) rounded to 0.01 mm."""
-    pos = np.round(toolpath.position[np.maximum(line, 0)], 2)
-    return [[None if i < 0 else float(v) for i, v in zip(line, pos[:, a], strict=True)]
-            for a in range(3)]
+    pos = np.round(toolpath.position[np.maximum(line, 0)], 2).astype(object)
+    pos[line < 0] = None
+    return [pos[:, a].tolist() for a in range(3)]
 
 
 def preview_figure(toolpath: Toolpath, traj: Trajectory | None = None,
