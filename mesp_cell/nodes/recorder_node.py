@@ -5,12 +5,14 @@ print stream) and closes at the print stream's end (event done or stopped), or `
 after the last state that named it. A job resumed later gets ``telemetry-2.mcap`` and so
 on. Bus callbacks only queue the messages; one thread writes
 (``mesp_cell.telemetry.JobRecorder``), so a slow disk never blocks the bus. Parameters:
-``jobs_db`` (the job store, for the job directory), ``record_hz``, ``max_mb``, ``idle_s``.
+``jobs_db`` (the job store, for the job directory), ``record_hz``, ``max_mb``, ``idle_s``,
+``nice`` (15: the process yields the CPU to the servo loop).
 """
 
 from __future__ import annotations
 
 import logging
+import os
 import queue
 import time
 from collections.abc import Sequence
@@ -44,6 +46,13 @@ class RecorderNode(LifecycleNode):
         db = self.params.get("jobs_db", "")
         if not db:
             raise NodeStartError("no jobs_db parameter", "name the job store in the launch file")
+        # a logger must never take the CPU from the servo loop on a small machine: lowest
+        # useful priority, and the imports a job's first state needs done now, not then
+        os.nice(int(self.params.get("nice", 15)))
+        import mcap.writer  # noqa: F401
+
+        from planner.trajectory import Trajectory  # noqa: F401
+
         self.store = JobStore(Path(db))
         self.record_hz = float(self.params.get("record_hz", 20.0))
         self.max_mb = float(self.params.get("max_mb", 1024.0))
