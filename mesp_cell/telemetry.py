@@ -8,7 +8,7 @@ the message dataclass (Foxglove decodes ``json`` channels with ``jsonschema`` sc
 | ``/robot/state`` | RobotState (q, qd deg; tcp mm) | ``tracking_error_mm`` (1) |
 | ``/extruder/state`` | ExtruderState (rate, rate_set mm^3/s, volume mm^3 totaliser) | |
 | ``/supervisor/progress`` | JobProgress | |
-| ``/robot/event``, ``/robot/waypoint``, ``/estop`` | StreamEvent, WaypointReached, EStop | |
+| ``/robot/event``, ``/estop`` (``/robot/waypoint``) | StreamEvent, EStop (WaypointReached) | |
 | ``/plan/trajectory`` | the commanded trajectory: t_s, q deg, tcp mm, extrude | |
 
 (1) |TCP - the TCP of the last commanded trajectory sample|, mm (-1 without one).

@@ -26,7 +26,6 @@ from mesp_cell.messages import (
     JobProgress,
     RobotState,
     StreamEvent,
-    WaypointReached,
 )
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from mesp_cell.telemetry import JobRecorder
@@ -35,8 +34,8 @@ log = logging.getLogger("mesp.recorder")
 SOURCES: tuple[tuple[str, str, type], ...] = (
     ("robot", "state", RobotState), ("extruder", "state", ExtruderState),
     ("supervisor", "progress", JobProgress), ("robot", "event", StreamEvent),
-    ("robot", "waypoint", WaypointReached), ("estop", "estop", EStop),
-)
+    ("estop", "estop", EStop),
+)  # not robot/waypoint: up to 400 events/s at a high time scale, and progress has the waypoint
 
 
 class RecorderNode(LifecycleNode):
