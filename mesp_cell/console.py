@@ -1,45 +1,57 @@
-"""Terminal progress display for the `mesp` commands (stderr, so stdout stays parseable)."""
+"""Terminal progress display for the `mesp` commands (stderr, so stdout stays parseable).
+
+Drawn with ``rich``: on a terminal a live bar for the running stage, which gives way to one
+line per finished stage; to a pipe or file only those lines, without control codes.
+"""
 
 from __future__ import annotations
 
 import sys
-import time
+from typing import IO
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TaskID, TextColumn, TimeElapsedColumn
 
 
 class ConsoleProgress:
-    """Prints one line per finished stage and a live fraction for long stages on a TTY."""
+    """Prints one line per finished stage and a live bar for long stages on a TTY."""
 
-    def __init__(self, stream=None, quiet: bool = False) -> None:  # type: ignore[no-untyped-def]
+    def __init__(self, stream: IO[str] | None = None, quiet: bool = False) -> None:
         self.stream = stream if stream is not None else sys.stderr
         self.quiet = quiet
         self.live = bool(getattr(self.stream, "isatty", lambda: False)())
-        self._stage = ""
-        self._last = 0.0
+        self.console = Console(file=self.stream, highlight=False, soft_wrap=True,
+                               force_terminal=self.live or None)
+        self._bar: Progress | None = None
+        self._task: TaskID | None = None
 
     def start(self, stage: str) -> None:
-        self._stage = stage
-        if not self.quiet and self.live:
-            self.stream.write(f"  {stage} ...\r")
-            self.stream.flush()
+        self._stop_bar()
+        if self.quiet or not self.live:
+            return
+        self._bar = Progress(TextColumn("  {task.description:<16}"), BarColumn(bar_width=24),
+                             TextColumn("{task.percentage:5.1f}% {task.fields[detail]}"),
+                             TimeElapsedColumn(), console=self.console, transient=True)
+        self._task = self._bar.add_task(stage, total=1.0, detail="")
+        self._bar.start()
 
     def update(self, fraction: float, detail: str = "") -> None:
-        now = time.monotonic()
-        if self.quiet or not self.live or now - self._last < 0.2:
-            return
-        self._last = now
-        bar = "#" * int(20 * min(max(fraction, 0.0), 1.0))
-        line = f"  {self._stage:<16} [{bar:<20}] {100 * fraction:5.1f}% {detail}"
-        self.stream.write(line + "\x1b[K\r")
-        self.stream.flush()
+        if self._bar is not None and self._task is not None:
+            self._bar.update(self._task, completed=min(max(fraction, 0.0), 1.0), detail=detail)
 
     def end(self, stage: str, seconds: float) -> None:
+        self._stop_bar()
         if not self.quiet:
-            clear = "\x1b[K" if self.live else ""
-            self.stream.write(f"  {stage:<16} done in {seconds:7.2f} s{clear}\n")
-            self.stream.flush()
+            self.console.print(f"  {stage:<16} done in {seconds:7.2f} s", markup=False)
 
     def info(self, text: str) -> None:
         """A line of information for the operator."""
         if not self.quiet:
-            self.stream.write(text + "\n")
-            self.stream.flush()
+            self._stop_bar()
+            self.console.print(text, markup=False)
+
+    def _stop_bar(self) -> None:
+        if self._bar is not None:
+            self._bar.stop()
+            self._bar = None
+            self._task = None

@@ -12,6 +12,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
 
+from slicer.figure_style import (
+    integer_ticks,
+    legend_below,
+    legend_outside,
+    style,
+    value_limits,
+)
 from slicer.stages import Layers
 
 
@@ -29,7 +36,15 @@ def height_histogram(
         target: float, mm, target layer height.
         path: output PNG.
     """
-    fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=120)
+    with style():
+        return _height_histogram(initial, initial_weights, final, final_weights, target, path)
+
+
+def _height_histogram(
+    initial: np.ndarray, initial_weights: np.ndarray, final: np.ndarray,
+    final_weights: np.ndarray, target: float, path: Path
+) -> Path:
+    fig, ax = plt.subplots(figsize=(8.6, 4.0), dpi=120)
     # Statistics of the true values; the drawing range follows the final field (with room
     # either side), since the harmonic baseline can have a very long tail.
     labels = []
@@ -57,7 +72,7 @@ def height_histogram(
     ax.set_xlabel("layer height H (mm; values outside the axis are drawn at its ends)")
     ax.set_ylabel("fraction of the layer area")
     ax.set_title("Layer height distribution")
-    ax.legend(fontsize=8)
+    legend_outside(ax)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)
@@ -65,20 +80,35 @@ def height_histogram(
 
 
 def convergence(o_align: Sequence[float], height_std: Sequence[float], path: Path) -> Path:
-    """O_align and layer-height std per iteration (paper Fig. 4e/f)."""
-    fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=120)
-    its = np.arange(len(o_align))
-    ax.semilogy(its, np.maximum(np.asarray(o_align, float), 1e-300), "o-", color="tab:red")
-    ax.set_xlabel("iteration")
-    ax.set_ylabel("O_align", color="tab:red")
-    if len(height_std):
-        twin = ax.twinx()
-        twin.plot(np.arange(len(height_std)), height_std, "s--", color="tab:blue")
-        twin.set_ylabel("layer height std (mm)", color="tab:blue")
-    ax.set_title("Convergence of the field iteration")
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    """O_align and layer-height std per iteration (paper Fig. 4e/f).
+
+    A field that needed no iteration (one value) is drawn as its point with a note saying so,
+    not as a lone marker on an empty axis.
+    """
+    with style():
+        fig, ax = plt.subplots(figsize=(7.2, 4.0), dpi=120)
+        its = np.arange(len(o_align))
+        handles = ax.semilogy(its, np.maximum(np.asarray(o_align, float), 1e-300), "o-",
+                              color="tab:red", label="O_align (alignment objective)")
+        ax.set_xlabel("iteration")
+        ax.set_ylabel("O_align (dimensionless)", color="tab:red")
+        integer_ticks(ax)
+        if len(height_std):
+            twin = ax.twinx()
+            twin.grid(False)
+            handles += twin.plot(np.arange(len(height_std)), height_std, "s--",
+                                 color="tab:blue", label="layer height std")
+            twin.set_ylabel("layer height std (mm)", color="tab:blue")
+        if len(o_align) <= 1:
+            ax.set_xlim(-1, 1)
+            ax.text(0.5, 0.85, "no iteration needed: the initial field was kept",
+                    transform=ax.transAxes, ha="center", va="center", color="0.3")
+        legend_below(ax, handles)
+        ax.set_title(f"Convergence of the field iteration ({max(len(o_align) - 1, 0)} "
+                     "iterations)")
+        fig.tight_layout()
+        fig.savefig(path)
+        plt.close(fig)
     return path
 
 
@@ -112,15 +142,23 @@ def section_view(layers: Layers, path: Path, axis: int = 1) -> Path:
     other = [i for i in range(3) if i != axis]
     seg2 = seg[:, :, other]
     colour = layers.vertex_height[f].mean(axis=1)
+    with style():
+        return _section_figure(seg2, colour, other, axis, level, layers.layer_count, path)
+
+
+def _section_figure(seg2: np.ndarray, colour: np.ndarray, other: list[int], axis: int,
+                    level: float, count: int, path: Path) -> Path:
+    """Draw the cut segments (k, 2, 2) mm coloured by H (k,) mm into ``path``."""
     fig, ax = plt.subplots(figsize=(6.0, 6.0), dpi=130)
     lc = LineCollection(list(seg2), array=colour, cmap="viridis", linewidths=0.6)
+    lc.set_clim(*value_limits(colour, 0.01))
     ax.add_collection(lc)
     ax.autoscale()
     ax.set_aspect("equal")
     names = "xyz"
     ax.set_xlabel(f"{names[other[0]]} (mm)")
     ax.set_ylabel(f"{names[other[1]]} (mm)")
-    ax.set_title(f"Layers cut at {names[axis]} = {level:.1f} mm ({layers.layer_count} layers)")
+    ax.set_title(f"Layers cut at {names[axis]} = {level:.1f} mm ({count} layers)")
     fig.colorbar(lc, ax=ax, label="layer height H (mm)", shrink=0.8)
     fig.tight_layout()
     fig.savefig(path)

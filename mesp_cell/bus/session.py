@@ -146,6 +146,13 @@ class Bus:
         sub = self._session.declare_subscriber(key(self.config.cell, node, topic), on_sample)
         self._keep.append(sub)
 
+    def subscribe_raw(self, key_expr: str, callback: Callable[[str, bytes], None]) -> None:
+        """Call ``callback(key, payload)`` for every sample on ``key_expr`` (wildcards allowed),
+        undecoded: for tools that look at every topic whatever its type (``mesp topic``)."""
+        sub = self._session.declare_subscriber(
+            key_expr, lambda sample: callback(str(sample.key_expr), sample.payload.to_bytes()))
+        self._keep.append(sub)
+
     # -- commands (request/reply) ----------------------------------------------------------
     def serve(self, handler: Callable[[Command], Reply], topic: str = "cmd") -> None:
         """Answer ``Command`` queries on this node's ``topic`` with ``handler``.

@@ -202,7 +202,8 @@ def run(args: argparse.Namespace) -> int:
         with timer.stage("figures"):
             section["figures"] = _figures(job, result, base)
             if slowed is not None:
-                section["figures"].append(_slowdown_figure(job, slowed))
+                synced = section["as_planned"]["flow"] == "synced"
+                section["figures"].append(_slowdown_figure(job, slowed, synced))
     section["timing_s"] = {k: round(v, 3) for k, v in timer.seconds.items()}
     update_report(job, {"inspect": section})
     columns = [("multi-axis", result["summary"])]
@@ -394,14 +395,14 @@ def _figures(job: Path, result: dict[str, Any], base: dict[str, Any] | None) -> 
     return [p.name for p in files]
 
 
-def _slowdown_figure(job: Path, slow: Any) -> str:
+def _slowdown_figure(job: Path, slow: Any, synced: bool) -> str:
     """inspect_as_planned.png: per layer, the slowed share of the path and its extra ink
     (``sim.as_planned.Slowdown``)."""
     from sim.as_planned import SLOWED
     from sim.inspect_figures import slowdown_plot
 
     return slowdown_plot(job / "inspect_as_planned.png", slow.layer, slow.length, slow.ratio,
-                         slow.extra_mm3, SLOWED).name
+                         slow.extra_mm3, SLOWED, synced).name
 
 
 def _comparison(main: dict[str, Any], base: dict[str, Any]) -> dict[str, Any]:

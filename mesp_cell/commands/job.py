@@ -41,6 +41,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                        "the job waiting in ready_check; it then starts printing")
     r.add_argument("job_id")
     r.set_defaults(func=ready)
+    ex = sub.add_parser("export", help="zip a job's report, figures, preview and telemetry")
+    ex.add_argument("job_id")
+    ex.add_argument("--out", type=Path, metavar="FILE.zip", help="default ./JOB_ID.zip")
+    ex.set_defaults(func=export)
     for verb, text in (("pause", "pause a printing job (resumable)"),
                        ("resume", "resume a paused or interrupted job from its checkpoint"),
                        ("abort", "abort a job (not resumable)")):
@@ -140,6 +144,20 @@ def _follow(client, job_id: str) -> int:  # type: ignore[no-untyped-def]
     if tty:
         print()
     return 0 if job.state == "done" else 1
+
+
+def export(args: argparse.Namespace) -> int:
+    """Bundle a job's files into one zip (mesp_cell.bundle)."""
+    from mesp_cell.bundle import bundle_job
+
+    client = _client(args)
+    try:
+        job = client.status(args.job_id)
+        out, files = bundle_job(Path(job.dir), args.out or Path(f"{job.id}.zip"))
+    finally:
+        client.close()
+    print(f"wrote {out}: {len(files)} files, {out.stat().st_size / 1e6:.1f} MB")
+    return 0
 
 
 def status(args: argparse.Namespace) -> int:

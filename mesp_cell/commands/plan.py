@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -25,8 +24,9 @@ collisions demand, leaned about the direction of motion up to lean_max_deg, whic
 or tilted within [70, 110] deg, the smallest deviation first), solves the joint motion by
 damped-least-squares differential kinematics and times it within the joint velocity and
 acceleration limits at the toolpath speed. Writes DIR/trajectory.npz, the "plan" section of
-DIR/report.json and figures/plan_*.png. The cell (robot base, tool, tank, gel, limits) is the
-bundled default (planner/cells/default.toml) overridden by --cell.
+DIR/report.json, figures/plan_*.png and DIR/preview.html (`mesp preview`). The cell (robot
+base, tool, tank, gel, limits) is the bundled default (planner/cells/default.toml) overridden
+by --cell.
 """
 
 
@@ -43,13 +43,22 @@ def register(sub: Any) -> None:
                    help="cell description overriding the bundled default")
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--render", action="store_true",
-                   help="also render the twin at the first sample (needs MUJOCO_GL=egl/osmesa)")
+                   help="also render the twin at the first sample (figures/plan_twin.png)")
+    p.add_argument("--video", action="store_true",
+                   help="also render the dry run on the twin: figures/dry_run.mp4 and its "
+                   "contact sheet figures/dry_run.png (docs/visual.md)")
+    p.add_argument("--speedup", type=float, default=0.0, metavar="X",
+                   help="video: print seconds per video second (default: a 40 s video)")
+    p.add_argument("--video-size", default="640x480", metavar="WxH",
+                   help="video: frame size in px (default 640x480)")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Plan the job in ``args.dir`` and print a one-line summary."""
+    import numpy as np
+
     from planner.cell import load_cell
     from planner.other_cells import checked_fix, try_cells
     from planner.plan import plan
@@ -57,9 +66,11 @@ def run(args: argparse.Namespace) -> int:
     from slicer.report import update_report
     from slicer.stages import Toolpath
 
-    if args.render:
-        # the GL backend must be chosen before mujoco is first imported; EGL is headless
-        os.environ.setdefault("MUJOCO_GL", "egl")
+    if args.render or args.video:
+        from sim.gl import choose_gl
+
+        choose_gl()  # before mujoco is first imported
+    size = _size(args.video_size)
     job_dir: Path = args.dir
     if not job_dir.is_dir():
         raise InputError(f"job directory {job_dir} does not exist", "run `mesp slice` first")
@@ -79,17 +90,29 @@ def run(args: argparse.Namespace) -> int:
     report = dict(result.report)
     if not args.no_figures:
         from planner.plots import write_plan_figures
+        from sim.preview import write_preview
 
         figures = write_plan_figures(result, job_dir / "figures")
         report["figures"] = [str(p.relative_to(job_dir)) for p in figures]
+        report["preview"] = write_preview(toolpath, job_dir / "preview.html",
+                                          result.trajectory).name
     if args.render:
         from sim.render import render_png
         from sim.twin import Twin
+        from sim.video import work_view
 
-        shot = render_png(Twin(cell), result.trajectory.q[0], job_dir / "figures" / "plan_twin.png")
+        traj = result.trajectory
+        # the arm at the first deposition, the whole arm in view
+        first = np.flatnonzero(np.asarray(traj.extrude))
+        lookat, extent = work_view(traj, toolpath)
+        shot = render_png(Twin(cell), traj.q[first[0] if len(first) else 0],
+                          job_dir / "figures" / "plan_twin.png", *size,
+                          lookat + np.array([0.0, 0.0, 0.1]), max(3.0 * extent, 0.5))
         if shot.path is None:
             progress.info(f"render skipped: {shot.message}")
         report["render"] = str(shot.path) if shot.path else shot.message
+    if args.video:
+        report["video"] = _video(job_dir, cell, result, toolpath, args.speedup, size, progress)
     report["total_s"] = time.perf_counter() - start
     update_report(job_dir, {"plan": report})
     summary = {
@@ -109,6 +132,54 @@ def run(args: argparse.Namespace) -> int:
               f"{fix}", file=sys.stderr)
         return 3
     return 0
+
+
+def _size(text: str) -> tuple[int, int]:
+    """(width, height) px of a ``WxH`` option."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        w = h = 0
+    if not (16 <= w <= 1920 and 16 <= h <= 1080):
+        raise InputError(f"--video-size {text} is not a frame size",
+                         "write WIDTHxHEIGHT in px, e.g. 640x480 (at most 1920x1080)")
+    return w, h
+
+
+def _video(job_dir: Path, cell: Any, result: Any, toolpath: Any, speedup: float,
+           size: tuple[int, int], progress: ConsoleProgress) -> dict[str, Any]:
+    """Render the dry-run video; its report entry (or why it was skipped)."""
+    import numpy as np
+
+    from sim.twin import Twin
+    from sim.video import render_video
+
+    if speedup < 0:
+        raise InputError(f"--speedup {speedup} is negative", "pass a positive speed-up")
+    traj = result.trajectory
+    speedup = speedup or max(1.0, traj.duration_s / 40.0)
+    required = float(result.report["required_clearance_mm"])
+    progress.info(f"rendering the dry run at x{speedup:g} ...")
+    part = None
+    if (job_dir / "model.ply").is_file():  # the surface mesp slice sliced, model frame
+        import trimesh
+
+        mesh: Any = trimesh.load(job_dir / "model.ply", force="mesh")
+        part = (np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    video = render_video(Twin(cell), traj, toolpath, job_dir / "figures" / "dry_run.mp4",
+                         speedup=speedup, width=size[0], height=size[1],
+                         clearance=result.clearance, low_clearance_mm=max(5.0, 2 * required),
+                         part=part)
+    if video.path is None:
+        progress.info(f"video skipped: {video.message}")
+        return {"skipped": video.message}
+    progress.info(f"video: {video.path} ({video.frames} frames, {video.render_s:.0f} s, "
+                  f"{video.render_s_per_print_min:.2f} s per print minute), {video.sheet}")
+    return {"path": str(video.path.relative_to(job_dir)),
+            "sheet": str(video.sheet.relative_to(job_dir)) if video.sheet else "",
+            "frames": video.frames, "speedup": speedup, "size_px": [video.width, video.height],
+            "low_clearance_mm": max(5.0, 2 * required), "render_s": round(video.render_s, 2),
+            "render_s_per_print_min": round(video.render_s_per_print_min, 3)}
 
 
 def _fix(result: Any) -> str:

@@ -55,7 +55,8 @@ def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
 
 
 def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
-    """Plan ``job_dir/toolpath.npz`` in the cell (None = bundled); writes trajectory.npz.
+    """Plan ``job_dir/toolpath.npz`` in the cell (None = bundled); writes trajectory.npz
+    and the plan figures.
 
     A plan that does not reach every waypoint or breaks a limit is refused with its status,
     so nothing moves.
@@ -73,5 +74,10 @@ def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
         raise InputError(f"plan refused ({result.status}): {result.message}",
                          "move the model (cell [placement]) or change the job")
     result.trajectory.save(job_dir)
-    update_report(job_dir, {"plan": result.report})
-    return result.report
+    from planner.plots import write_plan_figures
+
+    # the same plan_*.png `mesp plan` writes, so a job run through the cell can be looked at
+    figures = write_plan_figures(result, job_dir / "figures")
+    report = {**result.report, "figures": [str(p.relative_to(job_dir)) for p in figures]}
+    update_report(job_dir, {"plan": report})
+    return report

@@ -19,6 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slicer.artifacts import atomic_write_bytes
+from slicer.figure_style import integer_ticks, legend_outside, style, value_limits
 from slicer.stages import Layers, Toolpath
 
 if TYPE_CHECKING:
@@ -46,27 +47,26 @@ def _save(fig: Figure, path: Path) -> Path:
     return path
 
 
-def _plane_coords(points: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(k, 2) coordinates in the best-fit plane of ``points`` ((k, 3) mm)."""
+def _plane_coords(points: NDArray[np.float64]) -> tuple[NDArray[np.float64], tuple[str, str]]:
+    """(k, 2) coordinates in the best-fit plane of ``points`` ((k, 3) mm) and axis labels."""
+    top = ("model x (mm)", "model y (mm)")
     if len(points) < 3:
-        return points[:, :2]
+        return points[:, :2], top
     centred = points - points.mean(axis=0)
     _, _, vt = np.linalg.svd(centred, full_matrices=False)
     if abs(vt[2, 2]) > 0.9:
-        return points[:, :2]  # near-horizontal layer: plain top view in model x, y
-    return centred @ vt[:2].T
+        return points[:, :2], top  # near-horizontal layer: plain top view in model x, y
+    return centred @ vt[:2].T, ("in-layer u (mm, best-fit plane)", "in-layer v (mm)")
 
 
 def plot_layers(ax_list: list[Axes], toolpath: Toolpath, layer_ids: list[int]) -> None:
     """Draw layers ``layer_ids`` of ``toolpath`` into the given axes, coloured by W."""
     from matplotlib.collections import LineCollection
 
-    w_ext = toolpath.width[toolpath.extrude]
-    vmin = float(w_ext.min()) if w_ext.size else 0.0
-    vmax = float(w_ext.max()) if w_ext.size else 1.0
+    vmin, vmax = value_limits(toolpath.width[toolpath.extrude], 0.05)
     for ax, layer in zip(ax_list, layer_ids, strict=False):
         sel = np.flatnonzero(toolpath.layer == layer)
-        pos = _plane_coords(toolpath.position[sel])
+        pos, names = _plane_coords(toolpath.position[sel])
         ext = toolpath.extrude[sel]
         path = toolpath.path[sel]
         same = path[1:] == path[:-1]
@@ -78,14 +78,18 @@ def plot_layers(ax_list: list[Axes], toolpath: Toolpath, layer_ids: list[int]) -
         lc.set_clim(vmin, vmax)
         ax.add_collection(lc)
         ax.add_collection(LineCollection(list(segs[trav]), colors="0.6", linewidths=0.6,
-                                         linestyles="dashed"))
+                                         linestyles="dashed", label="travel (no ink)"))
         if len(pos):
             ax.set_xlim(pos[:, 0].min() - 1, pos[:, 0].max() + 1)
             ax.set_ylim(pos[:, 1].min() - 1, pos[:, 1].max() + 1)
         ax.set_aspect("equal")
         pattern = "contour" if len(sel) and toolpath.pattern[sel[0]] == 0 else "stripe"
         ax.set_title(f"layer {layer} ({pattern})")
-        ax.set_xlabel("mm")
+        ax.set_xlabel(names[0])
+        ax.set_ylabel(names[1])
+        ax.grid(False)
+        if trav.any():
+            ax.legend(loc="lower left", bbox_to_anchor=(0.0, 1.06), borderaxespad=0.0)
         ax.figure.colorbar(lc, ax=ax, label="toolpath width W (mm)", shrink=0.8)
 
 
@@ -102,13 +106,18 @@ def _cdf_legend(ax: Axes, empty: str) -> None:
     """The legend of the CDFs drawn on ``ax``, or ``empty`` where there was nothing to draw
     (a job without stripe layers)."""
     if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="lower right")
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.16), ncol=2, borderaxespad=0.0)
     else:
         ax.text(50, 0.5, empty, ha="center", va="center", color="0.4")
 
 
 def write_toolpath_figures(result: ToolpathResult, layers: Layers, out_dir: Path) -> list[Path]:
     """Write the PNGs listed in the module docstring into ``out_dir``; returns their paths."""
+    with style():
+        return _write(result, layers, out_dir)
+
+
+def _write(result: ToolpathResult, layers: Layers, out_dir: Path) -> list[Path]:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     tp = result.toolpath
@@ -154,16 +163,20 @@ def write_toolpath_figures(result: ToolpathResult, layers: Layers, out_dir: Path
 
     stats = result.layer_stats
     if stats:
-        fig, axes = _figure(11.0, 4.0, 2)
+        fig, axes = _figure(12.5, 4.0, 2)
         idx = np.array([s["layer"] for s in stats])
         axes[0].plot(idx, [s["required_mm3"] for s in stats], "-", label="required (int H dA)")
         axes[0].plot(idx, [s["deposited_mm3"] for s in stats], ".", label="deposited")
         axes[0].set_xlabel("layer")
         axes[0].set_ylabel("volume (mm$^3$)")
-        axes[0].legend()
+        axes[0].set_title("volume per layer")
+        legend_outside(axes[0])
         for s in stats:
             axes[1].plot([s["layer"]] * len(s["tau"]), s["tau"], "k.", ms=3)
         axes[1].set_xlabel("layer")
-        axes[1].set_ylabel("tau (spacing / W)")
+        axes[1].set_ylabel("tau = line spacing / W (dimensionless)")
+        axes[1].set_title("chosen spacing factor per path group")
+        for ax in axes:
+            integer_ticks(ax)
         written.append(_save(fig, out_dir / "volume_per_layer.png"))
     return written
