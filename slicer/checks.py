@@ -9,10 +9,14 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from slicer.toolpath.build import CENTRE_WIDTH_SCALE
+
 # Share of the layer vertices with H outside the profile above which the job is flagged.
 HEIGHT_OUT_OF_PROFILE = 0.01
 # |deposited / model volume - 1| above which the job is flagged (issue 3's 2 %).
 VOLUME_ERROR = 0.02
+# The narrowest line the toolpath prints, relative to the profile's W(H).
+THINNEST = CENTRE_WIDTH_SCALE[0]
 # Area share of a layer left bare or covered twice above which the job is flagged (issue 21).
 COVERAGE_LIMIT = {"contour": 0.03, "stripe": 0.05}
 
@@ -92,6 +96,17 @@ def job_notes(report: Mapping[str, Any]) -> list[str]:
                 f"{100 * COVERAGE_LIMIT[name]:.0f}% each); see toolpath.coverage.per_layer")
     error = toolpath.get("volume_error")
     if error is not None and abs(float(error)) > VOLUME_ERROR:
-        notes.append(f"toolpath: deposited volume is {100 * float(error):+.1f}% off the model's "
-                     "(more than 2%); see toolpath.per_layer in report.json for the layers")
+        narrowest = toolpath.get("width_over_profile", {}).get("min")
+        if float(error) > 0 and narrowest is not None and narrowest <= THINNEST + 1e-6:
+            # lines already at the narrowest width the nozzle speed can give, still too much
+            # ink: the part has walls or features thinner than one filament
+            notes.append(
+                f"toolpath: deposited volume is {100 * float(error):+.1f}% off the model's: "
+                "parts of it are thinner than the narrowest filament this profile prints "
+                f"({THINNEST:g} x its W); fix: scale the model up (--scale-to MM, or the "
+                "right --units) or use a profile with a finer nozzle")
+        else:
+            notes.append(f"toolpath: deposited volume is {100 * float(error):+.1f}% off the "
+                         "model's (more than 2%); see toolpath.per_layer in report.json for "
+                         "the layers")
     return notes

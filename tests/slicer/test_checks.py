@@ -76,3 +76,14 @@ def test_the_critical_line_names_each_selectors_regions() -> None:
                                      "mm^2; top:30: 2 region(s) of 80, 20 mm^2")
     assert critical_line({}) is None
     assert "none" in str(critical_line({"slicing": {"critical_regions": []}}))
+
+
+def test_too_much_ink_at_the_narrowest_width_names_thin_walls() -> None:
+    # a 0.2 mm tube wall (trimesh's round.stl at 40 mm): the centre line at half its W still
+    # lays 5.7x the ink
+    report = _report(volume_error=4.7, width_over_profile={"min": 0.5})
+    (note,) = job_notes(report)
+    assert "thinner than the narrowest filament" in note and "--scale-to" in note
+    wide = _report(volume_error=0.05, width_over_profile={"min": 0.8})
+    (note,) = job_notes(wide)
+    assert "see toolpath.per_layer" in note
