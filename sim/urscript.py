@@ -33,15 +33,16 @@ class ExtruderIO:
     """Which controller outputs drive the extruder.
 
     Attributes:
+        rate_mm3_s: the extruder's set-point for the job, mm^3/s (the job's extrusion profile's
+            ``setpoint_mm3_s``, the command that delivers its C: the profile is its one owner).
         run_output: standard digital output that runs the extruder (high = extrude).
         rate_output: standard analog output carrying the rate set-point.
-        rate_mm3_s: the constant volumetric rate C of the job, mm^3/s.
         full_scale_mm3_s: the rate the extruder runs at for a full-scale analog signal, mm^3/s.
     """
 
+    rate_mm3_s: float
     run_output: int = 0
     rate_output: int = 0
-    rate_mm3_s: float = 6.57
     full_scale_mm3_s: float = 20.0
 
     def __post_init__(self) -> None:

@@ -75,6 +75,7 @@ def _csv(job: Path, args: argparse.Namespace) -> str:
 def _urscript(job: Path, args: argparse.Namespace) -> str:
     from planner.trajectory import Trajectory
     from sim.urscript import ExtruderIO, urscript
+    from slicer.extrusion import load_job_profile
     from slicer.report import read_report
 
     if not (job / "trajectory.npz").is_file():
@@ -87,6 +88,6 @@ def _urscript(job: Path, args: argparse.Namespace) -> str:
     if args.max_step < 0.002:
         raise InputError(f"--max-step {args.max_step} s is below the 2 ms controller period",
                          "pass --max-step 0.002 or more")
-    rate = float(report.get("toolpath", {}).get("profile", {}).get("rate_mm3_s", 6.57))
-    io = ExtruderIO(args.run_output, args.rate_output, rate, args.rate_full_scale)
+    setpoint = load_job_profile(job).setpoint_mm3_s  # the profile owns C and its set-point
+    io = ExtruderIO(setpoint, args.run_output, args.rate_output, args.rate_full_scale)
     return urscript(Trajectory.load(job), io, max_step_s=args.max_step)

@@ -80,5 +80,6 @@ def test_bad_jobs_fail_fast_and_a_good_one_prints(cell: Launch, client: CellClie
 
     # The cell goes on: a valid job prints to the end.
     job = client.submit(synthetic.write_cube(tmp_path / "part.stl"))
+    client.confirm_ready(job.id, timeout=120)  # the operator confirms the tank
     done = client.wait(job.id, timeout=120)
     assert done.state == "done", done.reason

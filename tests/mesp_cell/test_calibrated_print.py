@@ -65,6 +65,7 @@ def test_recalibrated_cell_refuses_a_stale_job_and_prints_the_toolpath_volume(
             fresh = client.submit(cube, ROOT / "examples" / "cube.toml")
             refused = client.wait(stale.id, timeout=240)
             before = _truth(home)
+            client.confirm_ready(fresh.id, timeout=240)  # the operator confirms the tank
             done = client.wait(fresh.id, timeout=400)
             for _ in range(3):  # a loaded 2-core host may trip an interlock: resume, as a user
                 if done.state != "interrupted":

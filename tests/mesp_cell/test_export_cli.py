@@ -10,6 +10,7 @@ import pytest
 from mesp_cell.cli import main
 from planner.cell import load_cell
 from planner.plan import plan
+from slicer.extrusion import PROFILE_FILE, load_profile
 from slicer.report import update_report
 from tests.planner import synthetic
 
@@ -19,6 +20,7 @@ def job(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("job")
     tp = synthetic.lines(n_lines=2, length=10.0)
     tp.save(out)
+    load_profile("ecoflex-0030").save_to_job(out)  # as mesp slice records it
     result = plan(tp, load_cell())
     result.trajectory.save(out)
     update_report(out, {"plan": {"status": result.report["status"]}})
@@ -47,6 +49,9 @@ def test_missing_stage_and_refused_plan_are_one_line_errors(
     assert main(["export", str(tmp_path), "--format", "urscript"]) == 2
     assert "cannot be executed" in capsys.readouterr().err
     update_report(tmp_path, {"plan": {"status": "ok"}})
+    assert main(["export", str(tmp_path), "--format", "urscript"]) == 2
+    assert "re-slice" in capsys.readouterr().err  # no profile recorded: no set-point to send
+    (tmp_path / PROFILE_FILE).write_bytes((job / PROFILE_FILE).read_bytes())
     assert main(["export", str(tmp_path), "--format", "urscript",
                  "--rate-full-scale", "1"]) == 2
     assert "--rate-full-scale" in capsys.readouterr().err

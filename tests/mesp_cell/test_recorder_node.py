@@ -75,6 +75,7 @@ def test_twin_print_records_the_published_states(tmp_path: Path,
         capsys.readouterr()
         assert main(["job", "submit", str(model)]) == 0
         job_id = capsys.readouterr().out.split()[1]
+        client.confirm_ready(job_id, timeout=120.0)  # the operator confirms the tank
         # on a loaded machine the robot's servo watchdog may interrupt the print: the stream
         # then ends "stopped", which closes the recording just the same
         state = client.wait(job_id, timeout=120.0).state

@@ -27,7 +27,7 @@ def _fk(q: np.ndarray, tool_T: np.ndarray) -> np.ndarray:
 
 
 def test_program_parses_back_onto_the_trajectory(traj: Trajectory) -> None:
-    text = urscript(traj, ExtruderIO(run_output=2, rate_output=1))
+    text = urscript(traj, ExtruderIO(6.57, run_output=2, rate_output=1))
     prog = parse_urscript(text, run_output=2)
     assert np.allclose(prog.tool_T, traj.tool_T, atol=1e-6)
     assert prog.t[-1] == pytest.approx(traj.duration_s, abs=CONTROL_PERIOD_S)
@@ -43,7 +43,7 @@ def test_program_parses_back_onto_the_trajectory(traj: Trajectory) -> None:
 
 
 def test_replay_of_the_program_on_the_twin_matches_within_half_a_mm(traj: Trajectory) -> None:
-    prog = parse_urscript(urscript(traj, ExtruderIO()))
+    prog = parse_urscript(urscript(traj, ExtruderIO(6.57)))
     rep = Twin(load_cell()).replay(prog.trajectory(traj), record_every=5)
     q_ref = np.stack([np.interp(rep.t, traj.t, traj.q[:, j]) for j in range(6)], 1)
     error = np.linalg.norm(rep.tcp - _fk(q_ref, traj.tool_T), axis=1)
@@ -58,7 +58,7 @@ def test_long_intervals_are_split(traj: Trajectory) -> None:
 
 def test_bad_outputs_and_programs_are_user_errors() -> None:
     with pytest.raises(InputError):
-        ExtruderIO(run_output=9)
+        ExtruderIO(6.57, run_output=9)
     with pytest.raises(InputError):
         ExtruderIO(rate_mm3_s=30.0, full_scale_mm3_s=20.0)
     with pytest.raises(InputError):
