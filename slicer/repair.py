@@ -115,8 +115,9 @@ def load_repaired(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
                 "its surface is not a set of clean holes (edges shared by 3 faces, or "
                 "overlapping sheets): close it in a mesh editor (e.g. Blender 3D-Print "
                 "Toolbox, Meshmixer)") from exc
-    scale = (units.scale_mm if isinstance(units, ModelConfig)
-             else ModelConfig(units=units).scale_mm)  # type: ignore[arg-type]
+    # mm per file unit as loaded: the units and any --scale-to
+    scale = (float(np.ptp(np.asarray(surface.vertices), axis=0).max())
+             / max(float(np.ptp(vertices, axis=0).max()), 1e-300))
     line = (f"--repair: filled {fill.holes} hole{'s' if fill.holes != 1 else ''} "
             f"({fill.open_edges} open edges, largest {fill.largest_perimeter * scale:.1f} mm "
             f"round), added {fill.area_added * scale**2:.0f} mm^2 of surface")
