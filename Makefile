@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup demo test lint bench clean baselines browser
+.PHONY: setup demo test lint bench clean baselines browser render
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,6 +22,8 @@ test: $(STAMP)            ## set up, then run the whole test suite
 		echo "make baselines failed: the PrusaSlicer baseline tests will skip"
 	@$(MAKE) --no-print-directory browser || \
 		echo "make browser failed: the console's browser tests will skip"
+	@$(MAKE) --no-print-directory render || \
+		echo "make render failed: the twin's offscreen pictures and videos will skip"
 	$(BIN)/python -m pytest -q
 
 # PrusaSlicer, the commercial planar slicer of `mesp inspect DIR --baseline prusaslicer`.
@@ -46,6 +48,18 @@ browser:                  ## install chromium + chromium-driver when missing (De
 			{ apt-get update && apt-get install -y --no-install-recommends chromium chromium-driver; }; \
 	else \
 		echo "chromium is missing: sudo apt-get install chromium chromium-driver (until then the browser tests skip)"; \
+	fi
+
+# Offscreen OpenGL for MuJoCo (EGL, else OSMesa): dry-run videos, the console's twin view.
+render:                   ## install libegl1 + libosmesa6 when missing (Debian, as root)
+	@if ldconfig -p | grep -q 'libEGL.so.1' && ldconfig -p | grep -q 'libOSMesa.so'; then \
+		echo "offscreen GL: EGL and OSMesa present"; \
+	elif [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then \
+		export DEBIAN_FRONTEND=noninteractive; \
+		apt-get install -y --no-install-recommends libegl1 libegl-mesa0 libosmesa6 || \
+			{ apt-get update && apt-get install -y --no-install-recommends libegl1 libegl-mesa0 libosmesa6; }; \
+	else \
+		echo "offscreen GL is missing: sudo apt-get install libegl1 libegl-mesa0 libosmesa6"; \
 	fi
 
 lint: $(STAMP)

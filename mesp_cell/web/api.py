@@ -18,7 +18,7 @@ from typing import Annotated, Any
 
 from fastapi import Depends, FastAPI, File, Form, Request, UploadFile
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, JSONResponse, RedirectResponse
+from fastapi.responses import FileResponse, JSONResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 
 from mesp_cell.estop_check import confirm_estop
@@ -140,6 +140,20 @@ def build_app(ctx: ConsoleContext) -> FastAPI:
             raise ApiError(503, f"{', '.join(bad)} did not confirm the reset; check that the "
                                 "cell is running")
         return {"ok": True}
+
+    @app.get("/api/twin.png", dependencies=read, response_class=Response,
+             summary="the twin drawn at the pose the robot reports (PNG, at most 1 new frame/s)")
+    def twin_png() -> Response:
+        if ctx.twin is None:
+            raise ApiError(404, "this console draws no twin (its node has no twin view)")
+        robot = ctx.live.robot
+        if robot is None:
+            raise ApiError(503, "no robot state on the bus yet; is the robot node running "
+                                "(`mesp node list`)?")
+        png, why = ctx.twin.frame(robot.q)
+        if png is None:
+            raise ApiError(503, why)
+        return Response(png, media_type="image/png", headers={"Cache-Control": "no-store"})
 
     @app.get("/api/calibration", dependencies=read, summary="extrusion profiles on this cell")
     def calibration() -> dict[str, Any]:

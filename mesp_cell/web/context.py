@@ -38,6 +38,7 @@ class ConsoleContext:
     clients: set[asyncio.Queue[dict[str, Any]]] = field(default_factory=set)
     loop: asyncio.AbstractEventLoop | None = None  # the server's, once it runs
     news: asyncio.Event | None = None  # set (thread-safe) when a progress message arrives
+    twin: Any = None  # the TwinView drawing the cell at the robot's pose (None: not offered)
     _local: threading.local = field(default_factory=threading.local)
 
     @property

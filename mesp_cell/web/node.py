@@ -53,6 +53,7 @@ class ConsoleNode(LifecycleNode):
 
         from mesp_cell.web.api import build_app
         from mesp_cell.web.context import ConsoleContext
+        from mesp_cell.web.twin_view import TwinView
 
         p = self.params
         self.host = str(p.get("host", "127.0.0.1"))
@@ -70,10 +71,12 @@ class ConsoleNode(LifecycleNode):
                      self.host, token_path(home))
         assert self.bus is not None
         self.live = LiveState(float(p.get("dt", 0.002)))
+        cell_file = str(p.get("cell_file", "") or "")
         self.ctx = ConsoleContext(cell=self.bus_config.cell, home=home,
                                   db_path=Path(p.get("jobs_db", home / "jobs.sqlite")),
                                   bus=self.bus, live=self.live, token=token, token_all=remote,
-                                  max_upload=int(max_mb * (1 << 20)))
+                                  max_upload=int(max_mb * (1 << 20)),
+                                  twin=TwinView(Path(cell_file) if cell_file else None))
         app = build_app(self.ctx)
         config = uvicorn.Config(app, host=self.host, port=self.port, log_level="warning",
                                 ws="websockets-sansio", lifespan="on")
@@ -107,10 +110,15 @@ class ConsoleNode(LifecycleNode):
     def on_shutdown(self) -> None:
         if self._thread is not None:
             self._thread.join(3.0)
+        if self.ctx.twin is not None:
+            self.ctx.twin.close()
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Process entry point."""
+    from sim.gl import choose_gl
+
+    choose_gl()  # the twin view's offscreen GL, before mujoco is first imported
     return node_main(ConsoleNode, argv, "console")
 
 

@@ -297,6 +297,29 @@ $("submit-form").onsubmit = async (ev) => {
     selectJob(job.id);
   } catch (e) { $("submit-msg").textContent = e.message; }
 };
+// The twin drawn at the robot's pose, fetched with the token like every call, while shown.
+async function twinFrame() {
+  if (!$("twin-on").checked) return;
+  const headers = token() ? { Authorization: "Bearer " + token() } : {};
+  try {
+    const res = await fetch("/api/twin.png", { headers, cache: "no-store" });
+    if (!res.ok) {
+      let why = res.statusText;
+      try { why = (await res.json()).detail; } catch (e) { /* keep the status text */ }
+      $("twin-msg").textContent = why;
+      return;
+    }
+    const url = URL.createObjectURL(await res.blob());
+    const img = $("twin-img");
+    if (img.src) URL.revokeObjectURL(img.src);
+    img.src = url;
+    img.classList.remove("hidden");
+    $("twin-msg").textContent = "";
+    window.liveStats.twinFrames = (window.liveStats.twinFrames || 0) + 1;
+  } catch (e) { $("twin-msg").textContent = e.message; }
+}
+$("twin-on").onchange = twinFrame;
+setInterval(twinFrame, 1500);
 $("pv-layer").oninput = () => { $("pv-follow").checked = false; drawPreview(); };
 $("pv-colour").onchange = drawPreview;
 

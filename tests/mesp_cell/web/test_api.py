@@ -8,8 +8,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+import pytest
 from websockets.sync.client import connect
 
+from sim.render import GL_PROBLEM
 from tests.mesp_cell.conftest import Console
 
 
@@ -188,3 +190,15 @@ def test_estop_confirms_and_refuses_resume_until_reset(console: Console, ring: P
     assert console.post("/api/estop/reset").status_code == 200
     assert console.post(f"/api/jobs/{job_id}/resume").status_code == 200
     assert console.wait(job_id, ("done",))["state"] == "done"
+
+
+@pytest.mark.skipif(bool(GL_PROBLEM), reason=f"no offscreen GL here: {GL_PROBLEM}")
+def test_the_twin_is_drawn_at_the_robots_pose_at_most_once_a_second(console: Console) -> None:
+    import imageio.v3 as iio
+
+    first = console.http.get("/api/twin.png")
+    assert first.status_code == 200, first.text
+    assert first.headers["content-type"] == "image/png"
+    assert iio.imread(first.content, extension=".png").shape == (360, 480, 3)
+    again = console.http.get("/api/twin.png")  # within the second: the same frame
+    assert again.content == first.content

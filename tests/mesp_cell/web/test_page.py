@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from sim.render import GL_PROBLEM
 from tests.mesp_cell.conftest import Console
 
 CUBE = Path(__file__).resolve().parents[3] / "examples" / "cube.stl"
@@ -92,6 +93,12 @@ def test_operator_runs_a_job_from_the_page(console: Console, browser: Any,
     until("progress advancing", lambda: float(text("#bar-text").split()[0]) > first + 10)
     assert "/ 3" in text("#cur-layer") and "mm³" in text("#cur-ink")
     shot("3-printing")
+    if not GL_PROBLEM:  # the twin drawn at the robot's pose, as the print goes on
+        browser.find_element(By.ID, "twin-on").click()
+        until("a frame of the twin", lambda: (browser.execute_script(
+            "return window.liveStats.twinFrames || 0") >= 1))
+        assert browser.find_element(By.ID, "twin-img").size["width"] > 100
+        shot("3b-twin")
     until("the job's end", lambda: console.job(job_id)["state"] == "done")
     until("the history", lambda: job_id in text("#history"))
     # colour the preview by width and show fewer layers
