@@ -17,6 +17,7 @@ import pytest
 from mesp_cell.cli import main
 from mesp_cell.messages import RobotState
 from mesp_cell.telemetry import read_counts
+from tests.mesp_cell import synthetic
 
 
 def _wait(predicate, timeout: float, what: str) -> None:  # type: ignore[no-untyped-def]
@@ -45,8 +46,7 @@ def test_twin_print_records_the_published_states(tmp_path: Path,
                                                   monkeypatch: pytest.MonkeyPatch,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setenv("MESP_HOME", str(tmp_path))
-    model = tmp_path / "ring.stl"
-    model.write_text("solid ring\nendsolid ring\n")
+    model = synthetic.write_cube(tmp_path / "ring.stl")  # a real model: submit loads it
     from mesp_cell.launcher import CellClient
 
     client = CellClient.for_cell("sim")  # store only until the cell runs
