@@ -19,6 +19,7 @@ import numpy as np
 
 MIN_INTERVAL_S = 1.0  # at most one render per second, whoever asks
 SIZE_PX = (480, 360)  # width, height of a frame
+VIEW_EXTENT_M = 0.5  # what the camera frames around the tank, m
 
 
 class TwinView:
@@ -60,6 +61,9 @@ class TwinView:
                 self._why = f"the twin of {name} cannot be built ({exc})"
                 return None, self._why
             self._scene, self._why = open_scene(twin, *self.size, fast=True)
+            if self._scene is not None:  # the tank and the arm's lower links above it
+                floor = np.asarray(self._scene.model.geom("tank_floor").pos, float)
+                self._scene.frame_work(floor + np.array([0.0, 0.0, 0.2]), VIEW_EXTENT_M)
         if self._scene is None:
             return None, self._why
         import imageio.v3 as iio
