@@ -45,29 +45,28 @@ def _height_histogram(
     final_weights: np.ndarray, target: float, path: Path
 ) -> Path:
     fig, ax = plt.subplots(figsize=(8.6, 4.0), dpi=120)
+
     # Statistics of the true values; the drawing range follows the final field (with room
     # either side), since the harmonic baseline can have a very long tail.
-    labels = []
-    for values, weights in ((initial, initial_weights), (final, final_weights)):
+    def std(values: np.ndarray, weights: np.ndarray) -> str:
+        if not weights.sum() > 0:
+            return "no layers"
         mean = np.average(values, weights=weights)
-        labels.append(np.sqrt(np.average((values - mean) ** 2, weights=weights)))
-    lo, hi = np.percentile(final, [0.5, 99.5])
+        return f"std {np.sqrt(np.average((values - mean) ** 2, weights=weights)):.3f} mm"
+
+    shown = final if final_weights.sum() > 0 else initial
+    lo, hi = np.percentile(shown, [0.5, 99.5]) if len(shown) else (0.0, 2.0 * target)
     lo, hi = max(0.0, lo - 2.0 * (hi - lo) - 0.1 * target), hi + 2.0 * (hi - lo) + 0.1 * target
     bins = np.linspace(lo, hi, 60)
-    series = (
-        (np.clip(initial, lo, hi), initial_weights,
-         f"initial (harmonic): std {labels[0]:.3f} mm", "tab:grey"),
-        (np.clip(final, lo, hi), final_weights, f"final: std {labels[1]:.3f} mm", "tab:blue"),
-    )
-    for values, weights, label, colour in series:
-        ax.hist(
-            values,
-            bins=bins.tolist(),
-            weights=weights / weights.sum(),
-            alpha=0.6,
-            color=colour,
-            label=label,
-        )
+    for values, weights, name, colour in (
+            (initial, initial_weights, "initial (harmonic)", "tab:grey"),
+            (final, final_weights, "final", "tab:blue")):
+        label = f"{name}: {std(values, weights)}"
+        if not weights.sum() > 0:  # a field without layers (a flat harmonic start)
+            ax.plot([], [], color=colour, label=label)
+            continue
+        ax.hist(np.clip(values, lo, hi), bins=bins.tolist(), weights=weights / weights.sum(),
+                alpha=0.6, color=colour, label=label)
     ax.axvline(target, color="k", linestyle="--", linewidth=1, label=f"target {target:.2f} mm")
     ax.set_xlabel("layer height H (mm; values outside the axis are drawn at its ends)")
     ax.set_ylabel("fraction of the layer area")
