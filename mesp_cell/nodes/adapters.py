@@ -51,7 +51,25 @@ def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
     fn = getattr(pipeline, "slice_job", None) or pipeline.slice_model
     alpha = load_cell(Path(cell_file) if cell_file else None).planning.alpha_range
     report: dict[str, Any] = fn(model, Path(out_dir), job, alpha=alpha)
+    _check_volume(report)
     return report
+
+
+def _check_volume(report: dict[str, Any]) -> None:
+    """A job whose toolpath lays more or less ink than the model by beyond the slicer's own
+    limit (``slicer.checks.VOLUME_ERROR``) is refused before planning, with the slicer's note
+    (its cause and fix): the cell never prints a part it knows is out of tolerance."""
+    from slicer.checks import VOLUME_ERROR, job_notes
+
+    error = report.get("toolpath", {}).get("volume_error")
+    if error is None or abs(float(error)) <= VOLUME_ERROR:
+        return
+    note = next((n for n in job_notes(report) if "deposited volume" in n), "")
+    fix = note.split("fix: ", 1)[1] if "fix: " in note else (
+        "see toolpath.per_layer in report.json; scale the model (--scale-to) or change the "
+        "layer height")
+    raise InputError(f"the toolpath deposits {100 * float(error):+.1f}% of the model's volume "
+                     f"(limit {100 * VOLUME_ERROR:g}%)", fix)
 
 
 def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from mesp_cell.nodes import adapters
 from slicer.report import read_report
 from tests.planner import synthetic
@@ -18,3 +20,26 @@ def test_plan_job_writes_trajectory_and_plan_figures(tmp_path: Path) -> None:
     for p in report["figures"]:
         assert (tmp_path / p).stat().st_size > 5000
     assert read_report(tmp_path)["plan"]["figures"] == report["figures"]
+
+
+def test_a_slice_off_the_models_volume_is_refused_before_planning(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # trimesh's round.stl at 40 mm: a 0.2 mm tube wall, +470 % of the ink even at the
+    # narrowest width; the cell must not print it
+    from slicer import pipeline
+    from slicer.errors import InputError
+
+    model = tmp_path / "m.stl"
+    model.write_bytes(b"solid m\nendsolid m\n")
+
+    def fake(error: float) -> object:
+        def slice_model(*args: object, **kw: object) -> dict[str, object]:
+            return {"toolpath": {"volume_error": error, "width_over_profile": {"min": 0.5}}}
+        return slice_model
+
+    monkeypatch.setattr(pipeline, "slice_model", fake(4.7))
+    with pytest.raises(InputError) as refused:
+        adapters.slice_job(model, None, tmp_path / "job", "sim")
+    assert "+470.0%" in refused.value.problem and "--scale-to" in refused.value.fix
+    monkeypatch.setattr(pipeline, "slice_model", fake(0.004))
+    assert adapters.slice_job(model, None, tmp_path / "job", "sim")["toolpath"]
