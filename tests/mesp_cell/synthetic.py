@@ -6,13 +6,19 @@ name them (``slice_fn``/``plan_fn``) and run the whole cell without the real pip
 
 from __future__ import annotations
 
+import contextlib
+import os
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from slicer.artifacts import save_npz
 from slicer.stages import Toolpath
+
+if TYPE_CHECKING:
+    from mesp_cell.launcher import Launch
 
 HOME = np.radians([0.0, -100.0, 100.0, -90.0, -90.0, 0.0])
 LAYERS = 3
@@ -113,3 +119,24 @@ def slice_by_name(model: Path, job_file: Path | None, out_dir: Path, cell: str,
     if Path(model).name.startswith("kills"):
         raise WorkerKilled("the worker thread dies")
     return slice_job(model, job_file, out_dir, cell, cell_file)
+
+
+@contextlib.contextmanager
+def cell_in_home(home: Path, **overrides: Any) -> Iterator[Launch]:
+    """The bundled sim cell with the synthetic slicer and planner (``overrides`` on top),
+    running with ``home`` as its MESP_HOME; the environment is restored afterwards."""
+    from mesp_cell.launcher import start_cell
+
+    old = os.environ.get("MESP_HOME")
+    os.environ["MESP_HOME"] = str(home)
+    launch = start_cell(overrides={"slice_fn": "tests.mesp_cell.synthetic:slice_job",
+                                   "plan_fn": "tests.mesp_cell.synthetic:plan_job",
+                                   "prime_s": 0.1, **overrides})
+    try:
+        yield launch
+    finally:
+        launch.stop()
+        if old is None:
+            os.environ.pop("MESP_HOME", None)
+        else:
+            os.environ["MESP_HOME"] = old

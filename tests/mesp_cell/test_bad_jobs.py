@@ -9,14 +9,13 @@ stops, the job fails at once and the launcher restarts the node). A valid job th
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
-from mesp_cell.launcher import CellClient, Launch, start_cell
+from mesp_cell.launcher import CellClient, Launch
 from tests.mesp_cell import synthetic
 
 FAST_S = 30.0  # a failing job fails within this (the old wait was 3600 s)
@@ -24,20 +23,10 @@ FAST_S = 30.0  # a failing job fails within this (the old wait was 3600 s)
 
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Launch]:
-    home = tmp_path_factory.mktemp("mesp_home")
-    old = os.environ.get("MESP_HOME")
-    os.environ["MESP_HOME"] = str(home)
-    launch = start_cell(overrides={"slice_fn": "tests.mesp_cell.synthetic:slice_by_name",
-                                   "plan_fn": "tests.mesp_cell.synthetic:plan_job",
-                                   "prime_s": 0.1, "robot_backend": "twin"})
-    try:
+    with synthetic.cell_in_home(tmp_path_factory.mktemp("mesp_home"),
+                                slice_fn="tests.mesp_cell.synthetic:slice_by_name",
+                                robot_backend="twin") as launch:
         yield launch
-    finally:
-        launch.stop()
-        if old is None:
-            os.environ.pop("MESP_HOME", None)
-        else:
-            os.environ["MESP_HOME"] = old
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ import pytest
 
 from mesp_cell.drivers import registers as R
 from mesp_cell.drivers.extruder_modbus import ModbusExtruder
-from mesp_cell.launcher import CellClient, Launch, start_cell
+from mesp_cell.launcher import CellClient, Launch
 from mesp_cell.messages import FAULT_ESTOP, ExtruderState, RobotState, WaypointReached
 from slicer.errors import InputError
 from tests.mesp_cell import synthetic
@@ -53,20 +53,8 @@ class Recorder:
 
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Launch]:
-    home = tmp_path_factory.mktemp("mesp_home")
-    old = os.environ.get("MESP_HOME")
-    os.environ["MESP_HOME"] = str(home)
-    launch = start_cell(overrides={"slice_fn": "tests.mesp_cell.synthetic:slice_job",
-                                   "plan_fn": "tests.mesp_cell.synthetic:plan_job",
-                                   "prime_s": 0.1})
-    try:
+    with synthetic.cell_in_home(tmp_path_factory.mktemp("mesp_home")) as launch:
         yield launch
-    finally:
-        launch.stop()
-        if old is None:
-            os.environ.pop("MESP_HOME", None)
-        else:
-            os.environ["MESP_HOME"] = old
 
 
 @pytest.fixture(scope="module")
