@@ -71,10 +71,10 @@ def bench_bus(seconds: float, rate: float) -> dict[str, float]:
 def bench_servo(seconds: float, backend: str, rt: int = 0) -> dict[str, float]:
     import tempfile
 
+    from core.artifacts import save_npz
     from mesp_cell.drivers.robot_base import ServoConfig
     from mesp_cell.drivers.robot_twin import KinematicTwin, mujoco_twin
     from mesp_cell.drivers.stream import ServoStream, StreamPlan
-    from slicer.artifacts import save_npz
 
     K = int(seconds * 100) + 1
     t = np.arange(K) / 100.0

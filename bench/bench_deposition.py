@@ -24,10 +24,10 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from core.stages import Toolpath
 from sim.baseline import PlanarConfig, planar_toolpath
 from sim.deposition import DepositionConfig, EllipseMorphology, covering_grid, deposit
 from sim.voxels import MAX_VOXELS
-from slicer.stages import Toolpath
 
 
 def _morphology():  # type: ignore[no-untyped-def]

@@ -44,10 +44,10 @@ def tet_mesh(model: Path, edge: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def main() -> None:
+    from core.stages import TetMesh
     from slicer.config import SlicingConfig
     from slicer.field import compute_field
     from slicer.layers import extract_layers
-    from slicer.stages import TetMesh
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("model", type=Path)

@@ -28,11 +28,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from core.errors import InputError
+from core.stages import Toolpath
 from mesp_cell.drivers.stream import StreamPlan
 from planner.cell import load_cell
 from planner.plan import plan
-from slicer.errors import InputError
-from slicer.stages import Toolpath
 from tests.planner import synthetic
 
 STREAM_DT_S = 0.002  # the UR5e servo period the streamer resamples at

@@ -34,12 +34,12 @@ import trimesh
 from scipy import ndimage
 
 import sim.metrics as metrics
+from core.stages import Field, Layers, TetMesh, Toolpath
 from sim.deposition import DepositionConfig, covering_grid, deposit
 from slicer.config import JobConfig, load_job
 from slicer.extrusion import load_profile
 from slicer.layers import extract_layers, iso_surfaces
 from slicer.operators import build_operators
-from slicer.stages import Field, Layers, TetMesh, Toolpath
 from slicer.toolpath.build import compute_toolpath
 from slicer.toolpath.flush import flush_toolpath
 

@@ -37,8 +37,8 @@ def grid_mesh(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
 
 
 def system(n: int) -> tuple[sp.csr_matrix, np.ndarray, int]:
+    from core.stages import TetMesh
     from slicer.operators import build_operators
-    from slicer.stages import TetMesh
 
     verts, tets = grid_mesh(n)
     ops = build_operators(TetMesh(verts, tets))

@@ -41,8 +41,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from core.configtools import build  # noqa: E402
 from slicer.config import MeshConfig, default_data  # noqa: E402
-from slicer.configtools import build  # noqa: E402
 
 # name -> ([mesh] overrides of the defaults file, grading of the outside sizing field)
 SETTINGS: dict[str, tuple[dict[str, object], float]] = {

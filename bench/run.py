@@ -71,8 +71,8 @@ def run_one(
 def _to_vtu(job_dir: Path, path: Path) -> None:
     """Cache a job's tet mesh as .vtu (a format `mesp slice` reads)."""
     sys.path.insert(0, str(ROOT))
+    from core.stages import TetMesh
     from slicer.mesh_io import write_tet_mesh
-    from slicer.stages import TetMesh
 
     path.parent.mkdir(parents=True, exist_ok=True)
     write_tet_mesh(TetMesh.load(job_dir), path)

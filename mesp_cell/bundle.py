@@ -9,7 +9,7 @@ from __future__ import annotations
 import zipfile
 from pathlib import Path
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 PATTERNS = ("report.json", "job.toml", "preview.html", "telemetry*.mcap", "inspect_*.png",
             "figures/*", "export/*", "baseline_*.gcode")

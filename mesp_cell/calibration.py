@@ -21,8 +21,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
+from core.errors import InputError
 from mesp_cell.drivers.extruder_base import ExtruderDriver
-from slicer.errors import InputError
 
 MIN_RUNS = 3  # a slope and its uncertainty need one degree of freedom
 

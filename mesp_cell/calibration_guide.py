@@ -14,8 +14,8 @@ import time
 from collections.abc import Callable
 from typing import TextIO
 
+from core.errors import InputError
 from mesp_cell.scale import Scale
-from slicer.errors import InputError
 
 Check = Callable[[int, float, float], str]  # (run, seconds, grams) -> '' or why implausible
 

@@ -14,7 +14,7 @@ import sys
 import typing
 from collections.abc import Sequence
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 
 def command_modules() -> list[str]:

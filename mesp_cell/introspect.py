@@ -18,11 +18,11 @@ from typing import Any
 
 import numpy as np
 
+from core.errors import InputError
 from mesp_cell.bus.codec import CodecError, decode
 from mesp_cell.bus.keys import PREFIX, check_part, key, parse_key
 from mesp_cell.bus.session import Bus
 from mesp_cell.messages import Heartbeat
-from slicer.errors import InputError
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 STATES = (
     "submitted", "sliced", "planned", "ready_check", "printing", "paused", "interrupted", "done",

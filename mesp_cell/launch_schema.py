@@ -9,7 +9,7 @@ import re
 import typing
 from typing import Any
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 #: heartbeat_timeout range (s): 0 = off, else up to an hour.
 HEARTBEAT_TIMEOUT_S = (0.0, 3600.0)

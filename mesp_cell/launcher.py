@@ -31,12 +31,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from core.configtools import read_toml
+from core.errors import InputError
 from mesp_cell.bus.session import Bus, BusConfig
 from mesp_cell.drivers.extruder_emulator import free_port
 from mesp_cell.jobs import FINAL, JobRecord, JobStore, check_submission
 from mesp_cell.messages import Command, EStop, Heartbeat, JobProgress, Reply
-from slicer.configtools import read_toml
-from slicer.errors import InputError
 
 RESTART = ("never", "on-failure", "always")
 STARTUP_GRACE_S = 30.0  # s a node may take to send its first heartbeat

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 
 @dataclass(frozen=True)

@@ -17,8 +17,8 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-from slicer.artifacts import atomic_write_bytes
-from slicer.errors import InputError
+from core.artifacts import atomic_write_bytes
+from core.errors import InputError
 from slicer.extrusion import ACTIVE, ExtrusionProfile, load_profile
 from slicer.profiles import FACTORY, bundled_names
 

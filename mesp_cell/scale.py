@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from typing import Protocol
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 
 class Scale(Protocol):

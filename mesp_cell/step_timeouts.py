@@ -48,7 +48,7 @@ def slice_timeout(model: Path, job_file: Path | None) -> float:
 
 def plan_timeout(job_dir: Path) -> float:
     """Seconds to wait for planning the toolpath in ``job_dir`` (by its waypoints)."""
-    from slicer.stages import Toolpath
+    from core.stages import Toolpath
 
     try:
         with np.load(Path(job_dir) / Toolpath.FILE, mmap_mode="r") as data:

@@ -1,7 +1,7 @@
 """The cell description: robot base, tool, table, gel tank, model placement, planning limits.
 
 Loaded from TOML (``planner/cells/default.toml`` is the bundled cell of the paper's Fig. 10)
-into frozen dataclasses validated on construction; ``slicer.configtools.build`` turns every
+into frozen dataclasses validated on construction; ``core.configtools.build`` turns every
 bad value into an ``InputError`` naming the key. Lengths are mm and angles deg in the file and
 in these dataclasses; ``*_T`` helpers give homogeneous transforms in mm.
 """
@@ -15,10 +15,10 @@ from typing import Literal
 
 import numpy as np
 
-from slicer.alpha_range import AlphaRange
-from slicer.configtools import build, merge, read_ranges, read_toml
-from slicer.errors import InputError
-from slicer.toml_defaults import table
+from core.alpha_range import AlphaRange
+from core.configtools import build, merge, read_ranges, read_toml
+from core.errors import InputError
+from core.toml_defaults import table
 
 # every field default below comes from the bundled cell, the one defaults file of a cell
 _CELL = table("planner", "cells/default.toml")

@@ -19,8 +19,8 @@ from typing import NamedTuple, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from slicer.errors import InputError
-from slicer.stages import Toolpath
+from core.errors import InputError
+from core.stages import Toolpath
 
 # the lowest scale commanded: the arm stopping dead (a U-turn) still gets a trickle, so the
 # extruder's screw keeps its pressure (its flow response is first order, tau ~0.2 s)

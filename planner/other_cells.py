@@ -14,10 +14,10 @@ from importlib import resources
 from pathlib import Path
 from typing import NamedTuple
 
+from core.errors import InputError
+from core.stages import Toolpath
 from planner.cell import CellConfig, load_cell
 from planner.status import PlanStatus, Refused
-from slicer.errors import InputError
-from slicer.stages import Toolpath
 
 
 class CellTrial(NamedTuple):

@@ -15,6 +15,8 @@ from typing import NamedTuple
 
 import numpy as np
 
+from core.errors import InputError
+from core.stages import Toolpath
 from planner.cell import CellConfig, pose
 from planner.orientation import (
     ALPHA,
@@ -29,8 +31,6 @@ from planner.orientation import (
 )
 from planner.refusal import Bends, Steps, bends, cause_of, downward, waypoint_steps
 from planner.status import CAUSES, FIXES, Cause, Refused
-from slicer.errors import InputError
-from slicer.stages import Toolpath
 
 
 @dataclass(frozen=True)

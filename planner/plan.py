@@ -22,6 +22,9 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from core.errors import InputError
+from core.progress import Progress, StageTimer
+from core.stages import Toolpath
 from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.continuity import SWING_TOL_MM, subdivide
@@ -67,9 +70,6 @@ from planner.timing import (  # noqa: F401  (path_parameter: re-exported)
 from planner.trajectory import Trajectory
 from planner.upright import COMFORT, Upright, turn_towards, upright
 from planner.verify import verify
-from slicer.errors import InputError
-from slicer.progress import Progress, StageTimer
-from slicer.stages import Toolpath
 
 
 @dataclass(frozen=True)

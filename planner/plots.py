@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
+from core.figure_style import legend_outside, style
 from planner import kinematics as kin
 from planner.plan import PlanResult
 from planner.upright import COMFORT
-from slicer.figure_style import legend_outside, style
 
 MAX_POINTS = 20000  # plotted samples per curve; longer jobs are decimated evenly
 

@@ -136,8 +136,8 @@ def _reach_points(surface: Surface) -> np.ndarray:
 def reach_check(cell: CellConfig, surface: Surface, spins: int = 12) -> tuple[int, int, str]:
     """(unreached points, points, the first one's reason): the nozzle vertical at
     ``_reach_points``, the part at the tank centre, the gel filled to cover it, any spin."""
+    from core.stages import Toolpath
     from planner.placement import fit_gel
-    from slicer.stages import Toolpath
 
     v = surface.vertices
     lo, hi = v.min(axis=0), v.max(axis=0)

@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from core.stages import Toolpath
 from planner.cell import CellConfig
 from planner.orientation import (
     ALPHA,
@@ -27,7 +28,6 @@ from planner.orientation import (
     orientation_levels,
 )
 from planner.status import Cause
-from slicer.stages import Toolpath
 
 BEND_BATCH = 1 << 18  # (waypoint, axis) pairs per block of the bend test
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 
 class PlanStatus(StrEnum):

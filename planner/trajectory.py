@@ -7,8 +7,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from slicer.artifacts import Schema
-from slicer.stages import Stage
+from core.artifacts import Schema
+from core.stages import Stage
 
 
 @dataclass(frozen=True, eq=False)

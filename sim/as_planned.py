@@ -29,10 +29,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
+from core.stages import Toolpath
 from planner.flow import PlannedSpeeds, knot_flow_scale, segment_speeds
 from planner.trajectory import Trajectory
 from sim.deposition import Morphology, extrusion_segments
-from slicer.stages import Toolpath
 
 __all__ = ["SLOWED", "Flow", "PlannedSpeeds", "Slowdown", "effective_speed", "segment_speeds",
            "slowdown", "synced_segment_ink"]

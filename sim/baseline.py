@@ -44,9 +44,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from core.errors import InputError
+from core.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
 from sim.deposition import Morphology
-from slicer.errors import InputError
-from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
 
 VOLUME_MATCHING_BETA = float(np.sqrt(np.pi) / 2.0)
 

@@ -56,7 +56,7 @@ lays down the G-code's E). The G-code is written into the job directory
 ``baseline_prusaslicer.stl``) so it can be looked at. PrusaSlicer runs with
 a private, empty ``--datadir`` so a user's own PrusaSlicer presets never leak into the
 baseline. A missing executable, a PrusaSlicer error (its last stderr line) and a timeout all
-raise ``slicer.errors.InputError``.
+raise ``core.errors.InputError``.
 """
 
 from __future__ import annotations
@@ -74,12 +74,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from core.artifacts import atomic_write_bytes
+from core.errors import InputError
+from core.stages import Toolpath
 from sim.baseline import VOLUME_MATCHING_BETA, speed_for_height
 from sim.deposition import Morphology
 from sim.gcode import GcodeOptions, align_to_bounds, read_gcode
-from slicer.artifacts import atomic_write_bytes
-from slicer.errors import InputError
-from slicer.stages import Toolpath
 
 DEFAULT_EXECUTABLE = "prusa-slicer"
 GCODE_FILE = "baseline_prusaslicer.gcode"

@@ -58,13 +58,13 @@ from typing import NamedTuple, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from core.errors import InputError
+from core.progress import NullProgress, Progress
+from core.stages import Toolpath
+from core.tolerance import tol
 from sim import deposition_kernels as kernels
 from sim.voxels import MAX_VOXELS, VoxelGrid
-from slicer.errors import InputError
 from slicer.extrusion import factory_rate
-from slicer.progress import NullProgress, Progress
-from slicer.stages import Toolpath
-from slicer.tolerance import tol
 
 # A voxel counts as full above this fill fraction; excess below it is float noise.
 FULL = 1.0 - 1e-5

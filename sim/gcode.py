@@ -27,9 +27,9 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from slicer.errors import InputError
+from core.errors import InputError
+from core.stages import MAX_COORDINATE_MM, PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
 from slicer.extrusion import factory_rate
-from slicer.stages import MAX_COORDINATE_MM, PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
 
 MAX_GCODE_BYTES = 256 << 20  # a G-code file larger than this is refused before it is read
 

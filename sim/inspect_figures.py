@@ -14,9 +14,9 @@ import numpy as np
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from core.figure_style import integer_ticks, legend_outside, style
 from sim.deposition import Deposit
 from sim.metrics import Quality
-from slicer.figure_style import integer_ticks, legend_outside, style
 
 
 def _ct_legend() -> list[Patch | Line2D]:

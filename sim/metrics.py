@@ -42,9 +42,9 @@ from numpy.typing import NDArray
 from scipy import ndimage
 from scipy.spatial import cKDTree
 
+from core.stages import Toolpath
 from sim.deposition import Deposit
 from sim.voxels import VoxelGrid, closing_cube, fill_enclosed, iso_points, voxelize_mesh
-from slicer.stages import Toolpath
 
 FACING_DEG = 45.0  # a model face within this of +z is "up", of -z "down", else "side"
 

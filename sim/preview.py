@@ -17,9 +17,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from core.artifacts import atomic_write_bytes
+from core.stages import Toolpath
 from planner.trajectory import Trajectory
-from slicer.artifacts import atomic_write_bytes
-from slicer.stages import Toolpath
 
 MAX_POINTS = 150_000
 AXES = 400  # nozzle-axis cones drawn

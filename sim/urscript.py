@@ -22,8 +22,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from core.errors import InputError
 from planner.trajectory import Trajectory
-from slicer.errors import InputError
 
 CONTROL_PERIOD_S = 0.002  # UR e-series controller period (500 Hz)
 

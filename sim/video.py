@@ -20,12 +20,12 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from core.stages import Toolpath
 from planner.flow import segment_speeds
 from planner.trajectory import Trajectory
 from sim.as_planned import SLOWED
 from sim.render import open_scene
 from sim.twin import Twin
-from slicer.stages import Toolpath
 
 MAX_INK = 6000  # capsules drawn per frame; longer jobs draw every k-th segment of each path
 RED = np.array([220, 40, 40], np.uint8)

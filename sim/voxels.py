@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 # Largest grid the inspection builds (voxels); above it memory (several float32/int32 fields)
 # and the distance transforms get too heavy for a workstation.

@@ -2,7 +2,3 @@
 
 Pure library: no process, bus or robot code is imported here (design.md).
 """
-
-from slicer.errors import InputError
-
-__all__ = ["InputError"]

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import math
 
+from core.errors import InputError
 from slicer.config import JobConfig
-from slicer.errors import InputError
 
 #: Layers at most: each layer is a toolpath of its own.
 MAX_LAYERS = 2000

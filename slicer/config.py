@@ -10,9 +10,9 @@ from typing import Any, Literal
 
 import numpy as np
 
-from slicer.configtools import build, merge, read_ranges, read_toml
-from slicer.errors import InputError
-from slicer.toml_defaults import table
+from core.configtools import build, merge, read_ranges, read_toml
+from core.errors import InputError
+from core.toml_defaults import table
 
 # every field default below comes from the one defaults file
 _JOB = table("slicer", "defaults.toml")

@@ -27,8 +27,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.interpolate import PchipInterpolator
 
-from slicer.artifacts import atomic_write_bytes
-from slicer.errors import InputError
+from core.artifacts import atomic_write_bytes
+from core.errors import InputError
 
 PROFILE_FILE = "profile.toml"  # the job directory's verbatim copy of its profile
 ACTIVE = "active"  # the job's profile name for "the cell's active profile"

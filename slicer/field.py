@@ -71,13 +71,13 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from core.progress import NullProgress, Progress
+from core.stages import TetMesh
+from core.tolerance import tol
 from slicer.config import SlicingConfig
 from slicer.critical import CriticalSelection, select_critical_regions
 from slicer.operators import TetOperators, build_operators
-from slicer.progress import NullProgress, Progress
 from slicer.solvers import SPDSolver
-from slicer.stages import TetMesh
-from slicer.tolerance import tol
 
 ALIGN_WEIGHT = 1.0  # w_l; config.smoothness_weight is w_h relative to it
 NORMALISE_V = True

@@ -12,14 +12,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
 
-from slicer.figure_style import (
-    integer_ticks,
-    legend_below,
-    legend_outside,
-    style,
-    value_limits,
-)
-from slicer.stages import Layers
+from core.figure_style import integer_ticks, legend_below, legend_outside, style, value_limits
+from core.stages import Layers
 
 
 def height_histogram(

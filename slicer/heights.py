@@ -16,9 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.stages import Field, Layers
 from slicer.field import FieldResult, HeightStats
 from slicer.layers import iso_surfaces, match_slab_heights
-from slicer.stages import Field, Layers
 
 
 @dataclass(frozen=True, eq=False)

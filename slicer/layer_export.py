@@ -8,8 +8,8 @@ import numpy as np
 import trimesh
 from matplotlib import colormaps
 
-from slicer.artifacts import atomic_write_bytes
-from slicer.stages import Layers
+from core.artifacts import atomic_write_bytes
+from core.stages import Layers
 
 
 def export_layers_ply(layers: Layers, out_dir: Path) -> list[Path]:

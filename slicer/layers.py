@@ -35,14 +35,14 @@ from typing import NamedTuple
 
 import numpy as np
 
+from core.errors import InputError
+from core.progress import NullProgress, Progress
+from core.stages import Field, Layers, TetMesh
+from core.tolerance import tol
 from slicer.config import SlicingConfig
-from slicer.errors import InputError
 from slicer.field import FieldResult
 from slicer.operators import TET_EDGES, TetOperators, build_operators
-from slicer.progress import NullProgress, Progress
 from slicer.slabs import height_integral, slab_height_scale, slab_volumes
-from slicer.stages import Field, Layers, TetMesh
-from slicer.tolerance import tol
 
 
 class LayerSpacing(NamedTuple):

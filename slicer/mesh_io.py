@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from core.errors import InputError
+from core.stages import TetMesh
+from core.tolerance import tol
 from slicer.config import UNIT_SCALE_MM, ModelConfig
-from slicer.errors import InputError
-from slicer.stages import TetMesh
 from slicer.tetrahedralize import compact, orient_positive, tet_volumes
-from slicer.tolerance import tol
 
 SURFACE_SUFFIXES = (".stl", ".obj", ".ply")
 TET_SUFFIXES = (".msh", ".vtk", ".vtu")

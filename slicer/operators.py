@@ -24,9 +24,9 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from slicer.errors import InputError
-from slicer.stages import TetMesh
-from slicer.tolerance import tol
+from core.errors import InputError
+from core.stages import TetMesh
+from core.tolerance import tol
 
 # The four faces of a tet (v0, v1, v2, v3), face k is opposite local vertex k. For a positively
 # oriented tet these vertex orders give outward normals (right-hand rule).

@@ -14,16 +14,16 @@ import numpy as np
 import tomli_w
 import trimesh
 
-from slicer.alpha_range import AlphaRange
-from slicer.artifacts import atomic_write_bytes
+from core.alpha_range import AlphaRange
+from core.artifacts import atomic_write_bytes
+from core.configtools import to_dict
+from core.errors import InputError
+from core.progress import Progress, StageTimer
+from core.stages import TetMesh
 from slicer.budget import check_budget
 from slicer.config import JobConfig
-from slicer.configtools import to_dict
-from slicer.errors import InputError
 from slicer.mesh_io import Surface
-from slicer.progress import Progress, StageTimer
 from slicer.report import update_report
-from slicer.stages import TetMesh
 
 if TYPE_CHECKING:
     from slicer.layers import LayerExtraction, LayerSpacing

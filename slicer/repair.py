@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
+from core.errors import InputError
 from slicer.config import ModelConfig
-from slicer.errors import InputError
 from slicer.mesh_io import Surface, load_surface
 
 

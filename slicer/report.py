@@ -6,7 +6,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from slicer.artifacts import read_json, write_json
+from core.artifacts import read_json, write_json
 
 REPORT_FILE = "report.json"
 

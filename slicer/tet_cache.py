@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from core.stages import TetMesh
 from slicer.config import MeshConfig
 from slicer.mesh_io import Surface
-from slicer.stages import TetMesh
 from slicer.tetrahedralize import TetStats
 
 CACHE_ENV = "MESP_CACHE_DIR"

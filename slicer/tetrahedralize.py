@@ -29,11 +29,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from core.errors import InputError
+from core.progress import NullProgress, Progress
+from core.stages import TetMesh
+from core.tolerance import tol
 from slicer.config import MeshConfig
-from slicer.errors import InputError
-from slicer.progress import NullProgress, Progress
-from slicer.stages import TetMesh
-from slicer.tolerance import tol
 
 if TYPE_CHECKING:
     from slicer.mesh_io import Surface

@@ -10,7 +10,7 @@ from __future__ import annotations
 import re
 from typing import NamedTuple
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 PREFIX = "mesp"
 _PART = re.compile(r"^[a-z0-9][a-z0-9_\-]*$")

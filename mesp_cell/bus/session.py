@@ -16,10 +16,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TypeVar
 
+from core.errors import InputError
 from mesp_cell.bus.codec import CodecError, decode, encode
 from mesp_cell.bus.keys import check_part, key, liveliness_key, parse_key
 from mesp_cell.messages import Command, Reply
-from slicer.errors import InputError
 
 T = TypeVar("T")
 log = logging.getLogger("mesp.bus")

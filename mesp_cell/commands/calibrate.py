@@ -10,7 +10,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 EXTRUSION = """\
 Guided calibration of the extrusion rate C at the cell (paper sections 3.2, 5.2).
@@ -117,8 +117,8 @@ def _base(args: argparse.Namespace) -> tuple[Any, str, datetime, str]:
 
 def _finish(args: argparse.Namespace, text: str, name: str, cell: str) -> Path:
     """Save the profile (library or --out), activate it if asked; the path written."""
+    from core.artifacts import atomic_write_bytes
     from mesp_cell import profiles
-    from slicer.artifacts import atomic_write_bytes
 
     if args.out is not None:
         atomic_write_bytes(args.out, text.encode())

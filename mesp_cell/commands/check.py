@@ -9,7 +9,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 HELP = """\
 Preflight a model in seconds, without tetrahedralising or slicing it: whether it fits the

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 HELP = """\
 Write the job in a format other tools read (limits of each in docs/exports.md):
@@ -44,7 +44,7 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Write the requested export and print where it went."""
-    from slicer.artifacts import atomic_write_bytes
+    from core.artifacts import atomic_write_bytes
 
     job: Path = args.dir
     if not (job / "toolpath.npz").is_file():
@@ -59,14 +59,14 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _printpoints(job: Path, args: argparse.Namespace) -> str:
-    from slicer.stages import Toolpath
+    from core.stages import Toolpath
     from slicer.toolpath.printpoints import printpoints_json
 
     return printpoints_json(Toolpath.load(job))
 
 
 def _csv(job: Path, args: argparse.Namespace) -> str:
-    from slicer.stages import Toolpath
+    from core.stages import Toolpath
     from slicer.toolpath.printpoints import waypoints_csv
 
     return waypoints_csv(Toolpath.load(job))

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 DEFAULT_VOXEL_MM = 0.25
 # Voxels of the default grid: the socket (137 x 125 x 212 mm) at 0.35 mm, ~40 s and ~4.3 GB.
@@ -88,11 +88,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute `mesp inspect`."""
+    from core.progress import StageTimer
+    from core.stages import Toolpath
     from mesp_cell.console import ConsoleProgress
     from sim.deposition import DepositionConfig
-    from slicer.progress import StageTimer
     from slicer.report import read_report, update_report
-    from slicer.stages import Toolpath
 
     job = Path(args.dir)
     if not job.is_dir():
@@ -308,7 +308,7 @@ def _simulate(label: str, toolpath: Any, morphology: Any, vertices: np.ndarray,
 
 def _flush(job: Path, toolpath: Any, morphology: Any) -> tuple[Any, dict[str, Any]]:
     """The toolpath with exposed filaments made flush (slicer.toolpath.flush) and its report."""
-    from slicer.stages import TetMesh
+    from core.stages import TetMesh
     from slicer.toolpath.flush import flush_toolpath
 
     flushed, report = flush_toolpath(toolpath, TetMesh.load(job), morphology)

@@ -7,8 +7,8 @@ import sys
 import time
 from pathlib import Path
 
+from core.errors import InputError
 from mesp_cell.jobs import FINAL, JobRecord
-from slicer.errors import InputError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

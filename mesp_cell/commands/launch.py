@@ -8,7 +8,7 @@ import signal
 import sys
 from pathlib import Path
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -9,8 +9,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from core.errors import InputError
 from mesp_cell.console import ConsoleProgress
-from slicer.errors import InputError
 
 HELP = """\
 Plan the UR5e motion for a sliced job (paper sections 3.1 and 5.2).
@@ -59,12 +59,12 @@ def run(args: argparse.Namespace) -> int:
     """Plan the job in ``args.dir`` and print a one-line summary."""
     import numpy as np
 
+    from core.stages import Toolpath
     from planner.cell import load_cell
     from planner.other_cells import checked_fix, try_cells
     from planner.plan import plan
     from planner.status import PlanStatus, Refused
     from slicer.report import update_report
-    from slicer.stages import Toolpath
 
     if args.render or args.video:
         from sim.gl import choose_gl

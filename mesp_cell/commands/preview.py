@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 from typing import Any
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 HELP = """\
 Write DIR/preview.html: the toolpath in 3D, one line per layer, coloured by layer, width,
@@ -30,9 +30,9 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Write the preview and say where."""
+    from core.stages import Toolpath
     from planner.trajectory import Trajectory
     from sim.preview import write_preview
-    from slicer.stages import Toolpath
 
     job: Path = args.dir
     if not (job / "toolpath.npz").is_file():

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import tomllib
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

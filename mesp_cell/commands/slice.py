@@ -7,10 +7,10 @@ import json
 from pathlib import Path
 from typing import Any
 
+from core.errors import InputError
 from mesp_cell.console import ConsoleProgress
 from slicer.checks import critical_line, job_notes
 from slicer.config import JobConfig, load_job
-from slicer.errors import InputError
 
 HELP = """\
 Slice a solid model into curved layers and a width-constrained toolpath (paper section 4).

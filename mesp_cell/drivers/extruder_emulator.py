@@ -171,7 +171,7 @@ class EmulatorThread:
 
 def write_truth(plant: ExtruderPlant, path: str) -> None:
     """The plant's hidden truth as JSON: delivered and totalised volume, mm^3."""
-    from slicer.artifacts import write_json
+    from core.artifacts import write_json
 
     plant.step(time.monotonic())
     write_json(Path(path), {"true_volume_mm3": plant.true_volume, "volume_mm3": plant.volume,

@@ -21,9 +21,9 @@ from typing import Any
 
 import numpy as np
 
+from core.artifacts import load_npz
+from core.errors import InputError
 from mesp_cell.drivers.robot_base import UR5E_Q_LIMIT, UR5E_QD_LIMIT, RobotDriver
-from slicer.artifacts import load_npz
-from slicer.errors import InputError
 
 MAX_PERIODS = 1 << 20  # servo periods a stream keeps for its jitter statistics (~35 min at 500 Hz)
 SWING_LIMIT_MM = 0.5  # a depositing step may bow off the straight step by this much at most
@@ -270,8 +270,8 @@ class StreamPlan:
         if tp.is_file():
             from types import SimpleNamespace
 
+            from core.stages import Toolpath
             from planner.flow import knot_flow_scale
-            from slicer.stages import Toolpath
 
             toolpath = Toolpath.load(path.parent)
             if wp_id.size and wp_id.max() >= toolpath.layer.shape[0]:

@@ -13,7 +13,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 SliceFn = Callable[[Path, Path | None, Path, str, Path | None], dict[str, Any]]
 PlanFn = Callable[[Path, Path | None], dict[str, Any]]
@@ -79,10 +79,10 @@ def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
     A plan that does not reach every waypoint or breaks a limit is refused with its status,
     so nothing moves.
     """
+    from core.stages import Toolpath
     from planner.cell import load_cell
     from planner.plan import plan
     from slicer.report import update_report
-    from slicer.stages import Toolpath
 
     job_dir = Path(job_dir)
     toolpath = Toolpath.load(job_dir)

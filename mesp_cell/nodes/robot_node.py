@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from core.errors import InputError
 from mesp_cell.drivers.robot_base import RobotDriver, RobotLinkError, ServoConfig
 from mesp_cell.drivers.stream import ServoStream, StreamPlan, StreamResult
 from mesp_cell.messages import (
@@ -46,7 +47,6 @@ from mesp_cell.messages import (
 )
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from planner.cell import CellConfig, load_cell
-from slicer.errors import InputError
 
 END = "\x00end"  # guard reason that ends a stream at its ``end`` sample (not a stop)
 
@@ -382,7 +382,7 @@ class RobotNode(LifecycleNode):
 
         cell = self.cell
         if job_dir is not None and (job_dir / "toolpath.npz").is_file():
-            from slicer.stages import Toolpath
+            from core.stages import Toolpath
 
             cell = fit_gel(cell, Toolpath.load(job_dir))
         return Reach(cell)

@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from core.errors import InputError
 from mesp_cell.drivers.stream import StreamPlan, sha256_of
 from mesp_cell.jobs import JobRecord, JobStore
 from mesp_cell.messages import (
@@ -45,7 +46,6 @@ from mesp_cell.messages import (
 from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
 from mesp_cell.profiles import stale_reason
 from mesp_cell.step_timeouts import plan_timeout, slice_timeout
-from slicer.errors import InputError
 from slicer.extrusion import ExtrusionProfile, load_job_profile
 from slicer.report import update_report
 

@@ -21,6 +21,7 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, RedirectResponse, Response
 from fastapi.staticfiles import StaticFiles
 
+from core.errors import InputError
 from mesp_cell.estop_check import confirm_estop
 from mesp_cell.jobs import FINAL, JobRecord
 from mesp_cell.messages import Command, EStop
@@ -29,7 +30,6 @@ from mesp_cell.web.preview import toolpath_preview
 from mesp_cell.web.stream import add_live_route, broadcaster
 from mesp_cell.web.token import bearer_ok
 from mesp_cell.web.uploads import TooLarge, store_upload
-from slicer.errors import InputError
 
 STATIC = Path(__file__).resolve().parent / "static"
 
@@ -157,7 +157,7 @@ def build_app(ctx: ConsoleContext) -> FastAPI:
 
     @app.get("/api/calibration", dependencies=read, summary="extrusion profiles on this cell")
     def calibration() -> dict[str, Any]:
-        from slicer.configtools import read_toml
+        from core.configtools import read_toml
 
         out = []
         roots = [ctx.home / "profiles", Path(__file__).resolve().parents[2] / "slicer"

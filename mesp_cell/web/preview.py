@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 
 def toolpath_preview(job_dir: Path, max_points: int = 60_000) -> dict[str, Any]:

@@ -12,10 +12,10 @@ from typing import Any
 from fastapi import FastAPI, WebSocket
 from starlette.websockets import WebSocketDisconnect
 
+from core.errors import InputError
 from mesp_cell.jobs import JobRecord
 from mesp_cell.web.context import ConsoleContext, job_json
 from mesp_cell.web.token import bearer_ok
-from slicer.errors import InputError
 
 log = logging.getLogger("mesp.console")
 LIVE_PERIOD_S = 0.2  # the stream's period without news (the supervisor publishes at 5 Hz)

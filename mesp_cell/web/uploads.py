@@ -15,8 +15,8 @@ import shutil
 from pathlib import Path, PurePosixPath
 from typing import BinaryIO
 
+from core.errors import InputError
 from mesp_cell.jobs import check_submission
-from slicer.errors import InputError
 from slicer.mesh_io import SURFACE_SUFFIXES, TET_SUFFIXES
 
 CHUNK = 1 << 16

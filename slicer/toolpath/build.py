@@ -64,11 +64,11 @@ from typing import Any, Literal, NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from core.progress import Progress
+from core.stages import PATTERN_CONTOUR, PATTERN_STRIPE, LayerMesh, Layers, Toolpath
+from core.tolerance import tol
 from slicer.config import JobConfig, ToolpathConfig
 from slicer.extrusion import ExtrusionProfile
-from slicer.progress import Progress
-from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, LayerMesh, Layers, Toolpath
-from slicer.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.linking import (
     LIFT_FACTOR,

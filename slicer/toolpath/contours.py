@@ -7,8 +7,8 @@ from collections.abc import Callable
 import numpy as np
 from numpy.typing import NDArray
 
-from slicer.errors import InputError
-from slicer.tolerance import tol
+from core.errors import InputError
+from core.tolerance import tol
 from slicer.toolpath.isolines import iso_lines
 from slicer.toolpath.lines import SurfaceLines, empty_lines, merge_lines
 from slicer.toolpath.surface import check_mesh

@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from slicer.stages import Layers, Toolpath
+from core.stages import Layers, Toolpath
 from slicer.toolpath.linking import deposit_mask
 
 SAMPLES_PER_W2 = 6.0  # sample density relative to the layer's median width squared

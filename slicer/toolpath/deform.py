@@ -26,7 +26,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from slicer.errors import InputError
+from core.errors import InputError
 from slicer.toolpath.surface import check_mesh, components, face_normals, spd_solver
 
 Status = Literal["converged", "within_tolerance", "max_iterations"]

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from slicer.stages import Toolpath
+from core.stages import Toolpath
 
 DOWNWARD_DEG = 90.0  # a printing direction further than this from +z points downward
 JUMP_DEG = 30.0  # turn of the printing direction between neighbouring waypoints of a path

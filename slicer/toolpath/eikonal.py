@@ -41,7 +41,7 @@ from numba import njit
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from slicer.tolerance import tol
+from core.tolerance import tol
 
 ZERO = tol.zero  # numba kernels read module constants, not attributes
 

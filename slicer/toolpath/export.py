@@ -16,9 +16,9 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from slicer.artifacts import atomic_write_bytes
-from slicer.errors import InputError
-from slicer.stages import Toolpath
+from core.artifacts import atomic_write_bytes
+from core.errors import InputError
+from core.stages import Toolpath
 
 HEADER = "x y z nx ny nz W H v"
 LAYER_FILE = "layer_{:04d}.txt"

@@ -18,9 +18,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
-from slicer.artifacts import atomic_write_bytes
-from slicer.figure_style import integer_ticks, legend_outside, style, value_limits
-from slicer.stages import Layers, Toolpath
+from core.artifacts import atomic_write_bytes
+from core.figure_style import integer_ticks, legend_outside, style, value_limits
+from core.stages import Layers, Toolpath
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes

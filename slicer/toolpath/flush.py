@@ -42,8 +42,8 @@ from typing import Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from slicer.alpha_range import AlphaRange
-from slicer.stages import TetMesh, Toolpath
+from core.alpha_range import AlphaRange
+from core.stages import TetMesh, Toolpath
 
 # Smallest cosine between the printing direction and the surface normal used to convert a
 # distance to the surface into a move along the printing direction (steeper: capped anyway).

@@ -32,8 +32,8 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from slicer.errors import InputError
-from slicer.tolerance import tol
+from core.errors import InputError
+from core.tolerance import tol
 from slicer.toolpath.surface import (
     boundary_vertices,
     check_mesh,

@@ -30,7 +30,7 @@ from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import dijkstra
 from scipy.spatial import cKDTree
 
-from slicer.tolerance import tol
+from core.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.ordering import Piece
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from slicer.tolerance import tol
+from core.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines
 
 

@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from slicer.tolerance import tol
+from core.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.resample import line_index
 from slicer.toolpath.splice import Splice, find_splices, spliced_points

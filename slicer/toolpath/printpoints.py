@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from slicer.stages import Toolpath
+from core.stages import Toolpath
 
 PRINTPOINT_FIELDS = (
     "point", "layer_height", "mesh_normal", "up_vector", "frame", "extruder_toggle",

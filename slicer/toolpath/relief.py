@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from slicer.alpha_range import AlphaRange
-from slicer.stages import Toolpath
-from slicer.tolerance import tol
+from core.alpha_range import AlphaRange
+from core.stages import Toolpath
+from core.tolerance import tol
 
 MIN_STEP_MM = 0.05  # shorter steps have no direction worth checking
 ITERATIONS = 6

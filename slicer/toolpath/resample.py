@@ -16,7 +16,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
-from slicer.tolerance import tol
+from core.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines, empty_lines
 from slicer.toolpath.mapback import barycentric, interpolate
 

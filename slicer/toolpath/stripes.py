@@ -52,8 +52,8 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.linalg import LinearOperator, eigsh
 
-from slicer.errors import InputError
-from slicer.tolerance import tol
+from core.errors import InputError
+from core.tolerance import tol
 from slicer.toolpath.isolines import (
     Nodes,
     edge_crossings,

@@ -15,8 +15,8 @@ from numpy.typing import NDArray
 from scipy.sparse.csgraph import connected_components
 from scipy.sparse.linalg import splu
 
-from slicer.errors import InputError
-from slicer.tolerance import tol
+from core.errors import InputError
+from core.tolerance import tol
 
 
 class EdgeTopology(NamedTuple):

@@ -9,8 +9,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from slicer.errors import InputError
-from slicer.tolerance import tol
+from core.errors import InputError
+from core.tolerance import tol
 
 BAND_PIECES = 64  # boundary pieces searched for both sides of a band (band_width)
 

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from slicer.artifacts import save_npz
-from slicer.stages import Toolpath
+from core.artifacts import save_npz
+from core.stages import Toolpath
 
 
 def cube_stl(path: Path, size_mm: float = 20.0) -> Path:

@@ -24,12 +24,12 @@ import tomli_w
 from hypothesis import given
 from hypothesis import strategies as st
 
+from core.artifacts import save_npz
+from core.errors import InputError
+from core.stages import Toolpath
 from planner.cell import default_cell_data
 from sim.gcode import parse_gcode
-from slicer.artifacts import save_npz
 from slicer.config import default_data
-from slicer.errors import InputError
-from slicer.stages import Toolpath
 from tests.fuzz import fixtures
 from tests.fuzz.harness import COUNTS, TIME_LIMIT_S, _alarm, judge
 

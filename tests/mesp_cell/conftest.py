@@ -17,11 +17,11 @@ import httpx
 import numpy as np
 import pytest
 
+from core.artifacts import save_npz
 from mesp_cell.launcher import Launch, bundled_launch, start_cell
 from mesp_cell.web.node import console_urls
 from mesp_cell.web.token import load_token
 from planner.cell import load_cell
-from slicer.artifacts import save_npz
 from tests.mesp_cell import synthetic
 
 

@@ -14,8 +14,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from slicer.artifacts import save_npz
-from slicer.stages import Toolpath
+from core.artifacts import save_npz
+from core.stages import Toolpath
 
 if TYPE_CHECKING:
     from mesp_cell.launcher import Launch
@@ -73,8 +73,8 @@ def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
               cell_file: Path | None = None) -> dict[str, Any]:
     """Stands in for the slicing pipeline: refuses a missing model, writes toolpath.npz and
     records the cell's active extrusion profile."""
+    from core.errors import InputError
     from mesp_cell.profiles import active
-    from slicer.errors import InputError
 
     if not Path(model).is_file():
         raise InputError(f"model {model} does not exist", "check the path")

@@ -26,8 +26,8 @@ def test_a_slice_off_the_models_volume_is_refused_before_planning(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     # trimesh's round.stl at 40 mm: a 0.2 mm tube wall, +470 % of the ink even at the
     # narrowest width; the cell must not print it
+    from core.errors import InputError
     from slicer import pipeline
-    from slicer.errors import InputError
 
     model = tmp_path / "m.stl"
     model.write_bytes(b"solid m\nendsolid m\n")

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from core.errors import InputError
 from mesp_cell.bundle import bundle_job
-from slicer.errors import InputError
 
 
 def test_bundle_holds_what_a_reviewer_needs(tmp_path: Path) -> None:

@@ -9,10 +9,10 @@ from collections.abc import Iterator
 
 import pytest
 
+from core.errors import InputError
 from mesp_cell.bus.session import Bus, BusConfig
 from mesp_cell.drivers.extruder_emulator import free_port
 from mesp_cell.messages import Command, EStop, Heartbeat, Reply
-from slicer.errors import InputError
 
 
 @pytest.fixture

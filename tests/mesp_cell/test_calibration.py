@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import InputError
 from mesp_cell.calibration import check_consistency, check_mass, fit_rate, run_extrusion
 from mesp_cell.calibration_guide import Guide
 from mesp_cell.cli import main
@@ -19,7 +20,6 @@ from mesp_cell.drivers.extruder_modbus import ModbusExtruder
 from mesp_cell.drivers.extruder_plant import PlantParams
 from mesp_cell.drivers.scale_emulator import EmulatedScale, ScaleNoise
 from mesp_cell.scale import SerialScale
-from slicer.errors import InputError
 
 DENSITY = 1.07
 SETPOINT = 6.0

@@ -6,6 +6,7 @@ import dataclasses
 
 import pytest
 
+from core.errors import InputError
 from mesp_cell.bus.codec import CodecError, decode, encode
 from mesp_cell.bus.keys import key, parse_key
 from mesp_cell.messages import (
@@ -19,7 +20,6 @@ from mesp_cell.messages import (
     StreamEvent,
     WaypointReached,
 )
-from slicer.errors import InputError
 
 SAMPLES = [
     Heartbeat("robot", "active", 7, 1234, 1.5),

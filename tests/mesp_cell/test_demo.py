@@ -18,9 +18,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from slicer.artifacts import save_npz
+from core.artifacts import save_npz
+from core.stages import Toolpath
 from slicer.extrusion import ACTIVE, load_profile
-from slicer.stages import Toolpath
 from tests.mesp_cell import synthetic
 
 HOME = np.radians([0.0, -100.0, 100.0, -90.0, -90.0, 0.0])

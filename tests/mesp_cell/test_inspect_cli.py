@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 import trimesh
 
+from core.stages import TetMesh
 from mesp_cell.cli import main
 from sim import commercial
 from sim.baseline import VOLUME_MATCHING_BETA, PlanarConfig, planar_toolpath
 from sim.commercial import GCODE_FILE
 from sim.deposition import EllipseMorphology
 from slicer.report import read_report
-from slicer.stages import TetMesh
 
 
 @pytest.fixture()
@@ -199,8 +199,8 @@ def test_inspect_cli_names_the_model_when_model_ply_is_gone(
 def _save_trajectory(job: Path, slow: float, n: int | None = None) -> None:
     """A trajectory passing each waypoint of DIR's toolpath (or of ``n`` waypoints) at the
     toolpath's speed, ``slow`` times slower on the segments of layer 1."""
+    from core.stages import Toolpath
     from planner.trajectory import Trajectory
-    from slicer.stages import Toolpath
 
     tp = Toolpath.load(job)
     length = np.linalg.norm(np.diff(tp.position, axis=0), axis=1)

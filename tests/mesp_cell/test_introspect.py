@@ -12,11 +12,11 @@ import time
 import numpy as np
 import pytest
 
+from core.errors import InputError
 from mesp_cell.bus.codec import encode
 from mesp_cell.cli import main
 from mesp_cell.introspect import message_text, rate_stats, resolve_key
 from mesp_cell.messages import Heartbeat
-from slicer.errors import InputError
 
 
 def test_keys_types_and_rates() -> None:

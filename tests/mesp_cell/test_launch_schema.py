@@ -6,8 +6,8 @@ import math
 
 import pytest
 
+from core.errors import InputError
 from mesp_cell import launch_schema as check
-from slicer.errors import InputError
 
 
 def test_endpoints_need_a_port_in_range() -> None:

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from core.errors import InputError
 from mesp_cell.launcher import Launch, LaunchFailed, bundled_launch, load_launch
-from slicer.errors import InputError
 
 
 def test_bundled_launch_files_parse(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import InputError
 from mesp_cell.cli import main
 from mesp_cell.morphology_fit import fit_morphology, read_morphology_csv
-from slicer.errors import InputError
 
 
 def _table(path: Path) -> Path:

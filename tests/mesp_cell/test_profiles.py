@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import InputError
 from mesp_cell import profiles
 from mesp_cell.calibration import fit_rate
 from mesp_cell.cli import main
 from mesp_cell.profile_write import calibrated_text, default_name
-from slicer.errors import InputError
 from slicer.extrusion import load_profile
 
 

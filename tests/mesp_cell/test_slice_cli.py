@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from slicer.stages import Field, Layers, TetMesh, Toolpath
+from core.stages import Field, Layers, TetMesh, Toolpath
 
 ROOT = Path(__file__).resolve().parents[2]
 EXAMPLES = ROOT / "examples"

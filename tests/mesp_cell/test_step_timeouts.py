@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 
+from core.errors import InputError
 from mesp_cell.step_timeouts import (
     MAX_WAIT_S,
     PLAN_BASE_S,
@@ -14,7 +15,6 @@ from mesp_cell.step_timeouts import (
     plan_timeout,
     slice_timeout,
 )
-from slicer.errors import InputError
 from tests.mesp_cell import synthetic
 
 

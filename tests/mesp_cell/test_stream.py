@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.artifacts import save_npz
+from core.errors import InputError
 from mesp_cell.drivers.robot_base import ServoConfig, ur5e_flange
 from mesp_cell.drivers.robot_twin import KinematicTwin
 from mesp_cell.drivers.stream import ServoStream, StreamPlan, sha256_of
 from mesp_cell.nodes.robot_node import MustRun, must_run_mask
-from slicer.artifacts import save_npz
-from slicer.errors import InputError
 from tests.mesp_cell import synthetic
 
 N_WP = synthetic.LAYERS * synthetic.PER_LAYER

@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import InputError
 from mesp_cell.jobs import JobRecord
 from mesp_cell.launcher import CellClient, Launch
 from mesp_cell.messages import RobotState
 from mesp_cell.nodes.supervisor_node import EtaEstimate
 from planner.cell import load_cell
-from slicer.errors import InputError
 from tests.mesp_cell.conftest import Console
 
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
+from core.stages import Toolpath
 from planner.cell import CellConfig, load_cell
 from planner.plan import PlanResult, plan
-from slicer.stages import Toolpath
 from tests.planner import synthetic
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from slicer.stages import Toolpath
+from core.stages import Toolpath
 
 
 def make_toolpath(

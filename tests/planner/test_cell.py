@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import InputError
 from planner.cell import CellConfig, load_cell
-from slicer.errors import InputError
 
 
 def test_default_cell_is_valid(cell: CellConfig) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from core.stages import Toolpath
 from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.entry import PLUNGE, RETRACT, TRANSFER, safe_heights, safe_move, time_move
@@ -13,7 +14,6 @@ from planner.placement import fit_gel
 from planner.plan import PlanResult, plan
 from planner.status import PlanStatus
 from planner.timing import time_law
-from slicer.stages import Toolpath
 
 TOOL_PARTS = ("holder", "extruder", "nozzle_collar")
 

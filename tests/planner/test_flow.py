@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from core.errors import InputError
+from core.stages import Toolpath
 from planner.flow import MIN_FLOW_SCALE, knot_flow_scale, segment_speeds
 from planner.trajectory import Trajectory
-from slicer.errors import InputError
-from slicer.stages import Toolpath
 from tests.planner.synthetic import make_toolpath
 
 

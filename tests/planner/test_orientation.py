@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from core.stages import Toolpath
 from planner.cell import CellConfig
 from planner.orientation import (
     COLLISION,
@@ -18,7 +19,6 @@ from planner.orientation import (
 )
 from planner.placement import model_transform
 from planner.plan import plan, resample
-from slicer.stages import Toolpath
 from tests.planner.synthetic import make_toolpath, random_frames
 
 

@@ -7,13 +7,13 @@ import dataclasses
 import numpy as np
 import pytest
 
+from core.errors import InputError
+from core.stages import Toolpath
 from planner.cell import CellConfig
 from planner.orientation import Reach
 from planner.placement import YAW_APART_DEG, choose_placement, fit_gel
 from planner.plan import plan
 from planner.status import PlanStatus
-from slicer.errors import InputError
-from slicer.stages import Toolpath
 from tests.planner import synthetic
 
 

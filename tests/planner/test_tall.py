@@ -8,11 +8,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.stages import Toolpath
 from planner.cell import CellConfig, load_cell
 from planner.orientation import alpha_of, nozzle_axis
 from planner.placement import fit_gel
 from planner.plan import plan, repair_normals
-from slicer.stages import Toolpath
 from tests.planner import synthetic
 from tests.planner.synthetic import make_toolpath, random_frames
 

@@ -6,10 +6,10 @@ import dataclasses
 
 import numpy as np
 
+from core.stages import Toolpath
 from planner.cell import CellConfig
 from planner.plan import PlanResult, plan
 from planner.timing import _scan_limit
-from slicer.stages import Toolpath
 
 
 def test_scan_limit_equals_the_sequential_recursion() -> None:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from core.stages import Toolpath
 from planner import kinematics as kin
 from planner import plan as plan_module
 from planner.cell import CellConfig
@@ -17,7 +18,6 @@ from planner.plan import PlanResult, plan
 from planner.status import MESSAGES, PlanStatus
 from planner.trajectory import Trajectory
 from planner.verify import verify
-from slicer.stages import Toolpath
 
 
 def _check(result: PlanResult, traj: Trajectory, tp: Toolpath, cell: CellConfig

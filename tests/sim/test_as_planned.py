@@ -7,11 +7,11 @@ import itertools
 import numpy as np
 import pytest
 
+from core.errors import InputError
+from core.stages import Toolpath
 from planner.trajectory import Trajectory
 from sim.as_planned import segment_speeds, slowdown
 from sim.deposition import DepositionConfig, EllipseMorphology, deposit, extrusion_segments
-from slicer.errors import InputError
-from slicer.stages import Toolpath
 
 SPEED = 8.0  # mm/s
 

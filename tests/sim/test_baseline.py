@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from core.errors import InputError
+from core.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
 from sim.baseline import (
     VOLUME_MATCHING_BETA,
     PlanarConfig,
@@ -16,8 +18,6 @@ from sim.baseline import (
 )
 from sim.deposition import EllipseMorphology, covering_grid, deposit
 from sim.metrics import inspect_deposit
-from slicer.errors import InputError
-from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
 
 
 def _box(side: float) -> trimesh.Trimesh:

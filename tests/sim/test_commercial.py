@@ -14,6 +14,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from core.errors import InputError
+from core.stages import Toolpath
 from sim import commercial
 from sim.baseline import VOLUME_MATCHING_BETA
 from sim.commercial import (
@@ -26,9 +28,7 @@ from sim.commercial import (
 )
 from sim.deposition import EllipseMorphology
 from sim.gcode import GcodeOptions, align_to_bounds, parse_gcode
-from slicer.errors import InputError
 from slicer.extrusion import load_profile
-from slicer.stages import Toolpath
 
 HAVE_PRUSASLICER = shutil.which(commercial.DEFAULT_EXECUTABLE) is not None
 needs_prusaslicer = pytest.mark.skipif(

@@ -6,6 +6,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from core.errors import InputError
+from core.stages import Toolpath
 from sim.deposition import (
     DepositionConfig,
     EllipseMorphology,
@@ -15,8 +17,6 @@ from sim.deposition import (
 )
 from sim.metrics import inspect_deposit
 from sim.voxels import VoxelGrid
-from slicer.errors import InputError
-from slicer.stages import Toolpath
 
 
 def _toolpath(points: list[np.ndarray], layers: list[int], speed: float, height: float,

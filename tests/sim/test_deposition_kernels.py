@@ -163,8 +163,8 @@ def test_add_ink_tags_the_voxels_that_gain_more_than_they_held() -> None:
 
 
 def test_a_closing_wider_than_the_kernels_handle_is_a_user_error() -> None:
+    from core.errors import InputError
     from sim.deposition import DepositionConfig
-    from slicer.errors import InputError
 
     DepositionConfig(voxel_mm=0.04, gap_mm=1.0)  # radius 12 voxels: fine
     with pytest.raises(InputError, match="voxel of at least"):

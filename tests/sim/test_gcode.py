@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import InputError
+from core.stages import PATTERN_CONTOUR, PATTERN_STRIPE
 from sim.gcode import GcodeOptions, align_to_bounds, parse_gcode, read_gcode
-from slicer.errors import InputError
-from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE
 
 VOLUMETRIC = GcodeOptions(filament_diameter_mm=0.0, rate_mm3_s=6.0)
 
@@ -115,8 +115,8 @@ def test_modal_coordinates_and_several_g_words_on_a_line() -> None:
 def test_absurd_gcode_is_refused_by_line() -> None:
     import pytest
 
+    from core.errors import InputError
     from sim.gcode import parse_gcode
-    from slicer.errors import InputError
 
     ok = "G21\nG90\nM83\nG1 Z0.3\nG1 X0 Y0\nG1 X4 Y0 E0.2\n"
     for extra, needle in (("G1 X1e30 E0.2\n", "line 7: X1e\\+30"),

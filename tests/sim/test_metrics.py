@@ -7,10 +7,10 @@ import pytest
 import trimesh
 from scipy import ndimage
 
+from core.stages import Toolpath
 from sim.deposition import Deposit
 from sim.metrics import inspect_deposit, model_fraction
 from sim.voxels import VoxelGrid, closing_cube, fill_enclosed, iso_points, voxelize_mesh
-from slicer.stages import Toolpath
 
 
 def _box(lo: tuple[float, float, float], hi: tuple[float, float, float]) -> trimesh.Trimesh:

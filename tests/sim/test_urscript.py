@@ -5,13 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from core.errors import InputError
 from planner import kinematics as kin
 from planner.cell import load_cell
 from planner.plan import plan
 from planner.trajectory import Trajectory
 from sim.twin import Twin
 from sim.urscript import CONTROL_PERIOD_S, ExtruderIO, parse_urscript, servo_targets, urscript
-from slicer.errors import InputError
 from tests.planner import synthetic
 
 

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.stages import Toolpath
 from planner.cell import load_cell
 from planner.plan import PlanResult, plan
 from sim.twin import Twin
 from sim.video import frame_times, ink_segments, marks, render_video
-from slicer.stages import Toolpath
 from tests.planner import synthetic
 
 

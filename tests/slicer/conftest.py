@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from slicer.stages import TetMesh
+from core.stages import TetMesh
 
 
 def grid_tets(nx: int, ny: int, nz: int, periodic_y: bool = False) -> tuple[np.ndarray, np.ndarray]:

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
+from core.errors import InputError
 from slicer.budget import MAX_LAYERS, check_budget, layer_estimate
 from slicer.config import JobConfig
-from slicer.errors import InputError
 
 
 def test_layers_are_the_diagonal_over_the_height() -> None:

@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import InputError
 from slicer.config import CriticalSelector, JobConfig, load_job
-from slicer.errors import InputError
 
 
 def test_defaults_load_and_validate() -> None:

@@ -2,10 +2,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from core.stages import TetMesh
 from slicer.config import CriticalSelector
 from slicer.critical import select_critical_regions
 from slicer.operators import build_operators
-from slicer.stages import TetMesh
 from tests.slicer.conftest import box_mesh, grid_tets
 
 

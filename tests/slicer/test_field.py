@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from core.stages import TetMesh
 from slicer.config import SlicingConfig
 from slicer.field import compute_field, height_stats, layer_heights, stats_of_gradient
 from slicer.operators import build_operators
 from slicer.solvers import SPDSolver
-from slicer.stages import TetMesh
 from tests.slicer.conftest import ring_mesh
 
 

@@ -8,12 +8,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from core.stages import Layers
 from slicer.config import SlicingConfig
 from slicer.field import compute_field, height_stats
 from slicer.heights import FaceHeights, face_heights, initial_layers, outside_profile
 from slicer.layers import extract_layers
 from slicer.operators import build_operators
-from slicer.stages import Layers
 from tests.slicer.conftest import box_mesh
 
 

@@ -5,8 +5,9 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from core.errors import InputError
+from core.stages import Field, Layers, TetMesh
 from slicer.config import SlicingConfig
-from slicer.errors import InputError
 from slicer.field import compute_field
 from slicer.layers import (
     extract_layers,
@@ -17,7 +18,6 @@ from slicer.layers import (
     slab_bounds,
 )
 from slicer.operators import build_operators
-from slicer.stages import Field, Layers, TetMesh
 from tests.slicer.conftest import box_mesh, ring_mesh
 
 

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import trimesh
 
+from core.errors import InputError
+from core.stages import TetMesh
 from slicer.config import ModelConfig
-from slicer.errors import InputError
 from slicer.mesh_io import load_surface, load_tet_mesh, write_tet_mesh
-from slicer.stages import TetMesh
 from slicer.tetrahedralize import tet_volumes
 
 

@@ -3,9 +3,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slicer.errors import InputError
+from core.errors import InputError
+from core.stages import TetMesh
 from slicer.operators import build_operators, orient_tets, signed_volumes
-from slicer.stages import TetMesh
 from tests.slicer.conftest import box_mesh, ring_mesh
 
 

@@ -9,10 +9,10 @@ import meshio
 import numpy as np
 import pytest
 
+from core.stages import Toolpath
 from slicer.config import load_job
 from slicer.extrusion import load_profile
 from slicer.pipeline import slice_model
-from slicer.stages import Toolpath
 from tests.slicer.conftest import box_mesh
 
 

@@ -95,8 +95,8 @@ def test_refined_tetrahedralisation_matches_the_direct_one(tmp_path: Path) -> No
 
 
 def test_auto_refines_large_models_only(tmp_path: Path) -> None:
+    from core.errors import InputError
     from slicer.config import load_job
-    from slicer.errors import InputError
     from slicer.tetrahedralize import refinements
 
     assert MeshConfig().refine == "auto"
@@ -118,7 +118,7 @@ def test_auto_refines_large_models_only(tmp_path: Path) -> None:
 def test_auto_meshes_directly_where_the_refined_mesh_fails(
         monkeypatch: pytest.MonkeyPatch, tmp_path: Path, coarse: str) -> None:
     import slicer.tetrahedralize as T
-    from slicer.errors import InputError
+    from core.errors import InputError
 
     sphere = trimesh.creation.icosphere(subdivisions=2, radius=24.0)
     path = tmp_path / "ball.stl"

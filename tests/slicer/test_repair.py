@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from core.errors import InputError
 from mesp_cell.cli import main
-from slicer.errors import InputError
 from slicer.mesh_io import load_surface
 from slicer.repair import fill_holes, load_repaired, repair_offer
 

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from core.stages import Field
 from slicer.layers import extract_layers, iso_surfaces, slab_bounds
 from slicer.operators import build_operators
 from slicer.slabs import SCALE_LIMITS, height_integral, slab_height_scale, slab_volumes
-from slicer.stages import Field
 from tests.slicer.conftest import box_mesh
 
 

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 import trimesh
 
+from core.stages import Toolpath
 from mesp_cell.cli import main
 from slicer import tet_cache
 from slicer.config import MeshConfig
 from slicer.mesh_io import Surface, load_surface
-from slicer.stages import Toolpath
 from slicer.tetrahedralize import tetrahedralize
 
 

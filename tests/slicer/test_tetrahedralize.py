@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from core.errors import InputError
 from slicer.config import MeshConfig
-from slicer.errors import InputError
 from slicer.mesh_io import Surface, load_surface
 from slicer.tetrahedralize import (
     _grid_tets,

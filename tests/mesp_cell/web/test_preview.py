@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.errors import InputError
 from mesp_cell.web.live import planned_ink
 from mesp_cell.web.preview import toolpath_preview
-from slicer.errors import InputError
 from tests.mesp_cell import synthetic
 
 

@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
+from core.errors import InputError
 from mesp_cell.web.uploads import TooLarge, safe_stem, store_upload
-from slicer.errors import InputError
 
 CUBE = Path(__file__).resolve().parents[3] / "examples" / "cube.stl"
 

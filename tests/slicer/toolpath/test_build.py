@@ -9,9 +9,9 @@ import pytest
 from numpy.typing import NDArray
 from scipy.spatial import Delaunay, cKDTree
 
+from core.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Layers
 from slicer.config import JobConfig
 from slicer.extrusion import load_profile
-from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Layers
 from slicer.toolpath.build import ToolpathResult, compute_toolpath, layer_pattern
 from tests.slicer.toolpath.pattern_meshes import (
     eccentric_annulus,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slicer.stages import Layers, Toolpath
+from core.stages import Layers, Toolpath
 from slicer.toolpath.coverage import layer_coverage as _coverage
 
 

@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.stages import Layers
 from slicer.config import JobConfig, MeshConfig, load_job
 from slicer.extrusion import load_profile
 from slicer.field import compute_field
 from slicer.layers import extract_layers
 from slicer.mesh_io import load_surface
-from slicer.stages import Layers
 from slicer.tetrahedralize import tetrahedralize
 from slicer.toolpath.build import layer_pattern, layer_toolpath
 

@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from slicer.errors import InputError
-from slicer.stages import Toolpath
+from core.errors import InputError
+from core.stages import Toolpath
 from slicer.toolpath.export import (
     HEADER,
     export_layers_txt,

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from slicer.errors import InputError
+from core.errors import InputError
 from slicer.extrusion import (
     ACTIVE,
     PROFILE_FILE,

@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from slicer.stages import TetMesh, Toolpath
+from core.stages import TetMesh, Toolpath
 from slicer.toolpath.flush import (
     boundary_surface,
     filament_height,

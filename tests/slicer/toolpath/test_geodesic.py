@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slicer.errors import InputError
+from core.errors import InputError
 from slicer.toolpath import geodesic
 from tests.slicer.toolpath.pattern_meshes import disc, sliver_disc
 

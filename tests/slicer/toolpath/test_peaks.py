@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from core.stages import Layers
 from slicer.config import JobConfig
 from slicer.extrusion import load_profile
-from slicer.stages import Layers
 from slicer.toolpath import peaks
 from slicer.toolpath.build import compute_toolpath
 from slicer.toolpath.surface import boundary_edges

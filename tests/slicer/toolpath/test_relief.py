@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slicer.stages import Toolpath
+from core.stages import Toolpath
 from slicer.toolpath.relief import relieve_bends, step_elevation
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from slicer.errors import InputError
+from core.errors import InputError
 from slicer.toolpath import geodesic, stripes, surface, width_error
 from slicer.toolpath.lines import SurfaceLines
 from tests.slicer.toolpath.pattern_meshes import disc, dome, sliver_disc

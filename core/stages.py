@@ -13,8 +13,8 @@ from typing import ClassVar, Self
 
 import numpy as np
 
-from slicer.artifacts import Schema, load_npz, save_npz
-from slicer.errors import InputError
+from core.artifacts import Schema, load_npz, save_npz
+from core.errors import InputError
 
 #: Rows of any stage array at most (50 M tets / waypoints: far beyond a printable part).
 MAX_ROWS = 50_000_000

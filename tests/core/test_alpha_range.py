@@ -1,4 +1,4 @@
-"""The cell's printing-angle range sets the slicer's step limits (slicer.alpha_range)."""
+"""The cell's printing-angle range sets the slicer's step limits (core.alpha_range)."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.alpha_range import AlphaRange
+from core.stages import Toolpath
 from planner.cell import load_cell
-from slicer.alpha_range import AlphaRange
-from slicer.stages import Toolpath
 from slicer.toolpath.relief import relieve_bends
 
 

@@ -3,7 +3,7 @@
 A job's defaults live in ``slicer/defaults.toml`` and a cell's in ``planner/cells/default.toml``;
 the frozen dataclasses that validate them take their field defaults from those files
 (``table``), never from literals of their own, so the two cannot drift apart
-(``tests/slicer/test_toml_defaults.py`` fails on a literal default).
+(``tests/core/test_toml_defaults.py`` fails on a literal default).
 """
 
 from __future__ import annotations

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 # Mode of the files a job writes: readable by the lab like any output (mkstemp makes 0600).
 FILE_MODE = 0o644

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from core.figure_style import legend_outside, style, value_limits
 from slicer import figures
-from slicer.figure_style import legend_outside, style, value_limits
 
 
 def test_nearly_constant_values_get_plain_ticks_and_a_readable_range() -> None:

@@ -10,7 +10,7 @@ import pytest
 
 import planner.cell
 import slicer.config
-from slicer.toml_defaults import frozen, table
+from core.toml_defaults import frozen, table
 
 CONFIG_MODULES = [slicer.config, planner.cell]
 

@@ -20,7 +20,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, TypeVar
 
-from slicer.errors import InputError
+from core.errors import InputError
 
 T = TypeVar("T")
 Ranges = Mapping[str, tuple[float, float]]

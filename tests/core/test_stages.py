@@ -5,8 +5,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from slicer.errors import InputError
-from slicer.stages import Field, Layers, TetMesh, Toolpath
+from core.errors import InputError
+from core.stages import Field, Layers, TetMesh, Toolpath
 
 
 def _tetmesh() -> TetMesh:
@@ -97,7 +97,7 @@ def test_save_is_atomic_and_leaves_no_temp_files(tmp_path: Path) -> None:
 
 
 def test_stage_files_are_readable_by_the_lab(tmp_path: Path) -> None:
-    from slicer.artifacts import atomic_write_bytes, save_npz
+    from core.artifacts import atomic_write_bytes, save_npz
 
     atomic_write_bytes(tmp_path / "report.json", b"{}")
     save_npz(tmp_path / "a.npz", {"x": np.zeros(3)})

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from slicer.toml_defaults import table
+from core.toml_defaults import table
 
 # Flushing moves may tilt a step by at most this fraction of the range's step elevation: the
 # planner keeps alpha within range against both ends of a step, and a flushed step's end
