@@ -23,7 +23,7 @@ from core.errors import InputError
 from core.stages import TetMesh
 from core.tolerance import tol
 from slicer.config import UNIT_SCALE_MM, ModelConfig
-from slicer.tetrahedralize import compact, orient_positive, tet_volumes
+from slicer.tet_geometry import compact, orient_positive, tet_volumes
 
 SURFACE_SUFFIXES = (".stl", ".obj", ".ply")
 TET_SUFFIXES = (".msh", ".vtk", ".vtu")

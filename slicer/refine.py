@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slicer.operators import TET_FACES
-from slicer.tetrahedralize import orient_positive, tet_volumes
+from slicer.tet_geometry import orient_positive, tet_volumes
 
 _PAIRS = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
 # The inner octahedron's three diagonals (pairs of opposite edge midpoints, as indices into

@@ -26,9 +26,11 @@ import numpy as np
 from core.stages import TetMesh
 from slicer.config import MeshConfig
 from slicer.mesh_io import Surface
-from slicer.tetrahedralize import TetStats
+from slicer.tet_stats import TetStats
 
 CACHE_ENV = "MESP_CACHE_DIR"
+#: the meshing code a cached mesh depends on (files of this package)
+MESHING_SOURCES = ("tetrahedralize.py", "refine.py", "tet_geometry.py")
 
 
 def cache_dir() -> Path | None:
@@ -44,16 +46,14 @@ def cache_dir() -> Path | None:
 
 def cache_key(surface: Surface, config: MeshConfig, grading: float) -> str:
     """SHA-256 (hex) of everything the tet mesh depends on (module docstring)."""
-    from slicer import refine, tetrahedralize
-
     h = hashlib.sha256()
     h.update(np.ascontiguousarray(surface.vertices, dtype=np.float64).tobytes())
     h.update(np.ascontiguousarray(surface.faces, dtype=np.int64).tobytes())
     h.update(json.dumps(asdict(config), sort_keys=True).encode())
     h.update(repr(float(grading)).encode())
     h.update(metadata.version("pytetwild").encode())
-    for module in (tetrahedralize, refine):
-        h.update(Path(str(module.__file__)).read_bytes())
+    for source in MESHING_SOURCES:  # read as files: this module imports none of them
+        h.update(Path(__file__).with_name(source).read_bytes())
     return h.hexdigest()
 
 

@@ -23,7 +23,7 @@ import contextlib
 import os
 import tempfile
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -33,7 +33,10 @@ from core.errors import InputError
 from core.progress import NullProgress, Progress
 from core.stages import TetMesh
 from core.tolerance import tol
+from slicer import tet_cache
 from slicer.config import MeshConfig
+from slicer.tet_geometry import compact, orient_positive, tet_volumes
+from slicer.tet_stats import TetStats
 
 if TYPE_CHECKING:
     from slicer.mesh_io import Surface
@@ -61,89 +64,6 @@ SLIVER_DEG = 10.0
 # The pairs of faces of a tet (face k is opposite vertex k) meeting at each of its 6 edges.
 _FACE_PAIRS = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
 _EDGES = np.array([(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)])
-
-
-@dataclass(frozen=True)
-class TetStats:
-    """Size and quality of a tet mesh (for the report and the benchmark).
-
-    Attributes:
-        tets: number of tets.
-        vertices: number of vertices.
-        mean_edge_mm: mean length of the unique edges, mm.
-        min_dihedral_deg: smallest dihedral angle, deg (a regular tet has 70.53).
-        max_dihedral_deg: largest dihedral angle, deg.
-        sliver_fraction: fraction of tets with a dihedral angle below ``SLIVER_DEG`` (robust
-            where the single smallest angle is one unlucky tet).
-        mean_quality: mean radius ratio 3 r_in / r_circ (1 = regular tet, 0 = flat).
-        worst_quality: smallest radius ratio.
-        volume_mm3: total tet volume, mm^3.
-        surface_volume_mm3: volume enclosed by the input surface, mm^3 (nan if unknown).
-        volume_error: volume_mm3 / surface_volume_mm3 - 1.
-        seconds: wall-clock time of the whole tetrahedralisation (fTetWild and refinement), s.
-        reoriented: tets whose vertex order was flipped to make them positive.
-        refinements: red refinements after fTetWild (``[mesh] refine``).
-        ftetwild_tets: tets fTetWild produced (before the refinements).
-        ftetwild_seconds: wall-clock time of fTetWild alone, s.
-        snapped_mm_max: mm, the largest move of a refined boundary vertex onto the surface.
-        refine_fallback: refine = "auto" meshed directly after the refined mesh failed or
-            missed the solid's volume by more than ``AUTO_MAX_VOLUME_ERROR``.
-        cached: the mesh was read back from the cache (``slicer.tet_cache``), not made now
-            (the times are those of the run that made it).
-    """
-
-    tets: int
-    vertices: int
-    mean_edge_mm: float
-    min_dihedral_deg: float
-    max_dihedral_deg: float
-    sliver_fraction: float
-    mean_quality: float
-    worst_quality: float
-    volume_mm3: float
-    surface_volume_mm3: float
-    volume_error: float
-    seconds: float
-    reoriented: int = 0
-    refinements: int = 0
-    ftetwild_tets: int = 0
-    ftetwild_seconds: float = 0.0
-    snapped_mm_max: float = 0.0
-    refine_fallback: bool = False
-    cached: bool = False
-
-    def as_dict(self) -> dict[str, Any]:
-        """Plain values for report.json (``mesh`` section)."""
-        return asdict(self)
-
-
-def tet_volumes(vertices: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """Signed volume of each tet, mm^3: (T,) float64, positive when det(p1-p0, p2-p0, p3-p0) > 0.
-
-    Args:
-        vertices: (V, 3) float64, mm.
-        tets: (T, 4) int, vertex indices.
-    """
-    p = vertices[tets]
-    a, b, c = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0], p[:, 3] - p[:, 0]
-    return np.einsum("ij,ij->i", np.cross(a, b), c) / 6.0
-
-
-def orient_positive(vertices: np.ndarray, tets: np.ndarray) -> np.ndarray:
-    """The tets with the last two vertices swapped where the volume is negative: (T, 4) int32."""
-    out = np.array(tets, dtype=np.int32, copy=True)
-    negative = tet_volumes(vertices, out) < 0
-    out[negative, 2], out[negative, 3] = out[negative, 3], out[negative, 2].copy()
-    return out
-
-
-def compact(vertices: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Drop vertices no cell uses and renumber: ((V', 3) float64, (C, k) int32)."""
-    used, inverse = np.unique(cells, return_inverse=True)
-    return (
-        np.asarray(vertices, dtype=np.float64)[used],
-        inverse.reshape(cells.shape).astype(np.int32),
-    )
 
 
 def quality(
@@ -301,8 +221,6 @@ def tetrahedralize(
         grading = float(getattr(config, "grading", DEFAULT_GRADING))
     if cache is None:
         return _fresh(surface, config, grading, threads, progress)
-    from slicer import tet_cache
-
     key = tet_cache.cache_key(surface, config, grading)
     hit = tet_cache.load(cache, key)
     if hit is not None:

@@ -13,7 +13,7 @@ from core.errors import InputError
 from core.stages import TetMesh
 from slicer.config import ModelConfig
 from slicer.mesh_io import load_surface, load_tet_mesh, write_tet_mesh
-from slicer.tetrahedralize import tet_volumes
+from slicer.tet_geometry import tet_volumes
 
 
 def _box(size: float = 20.0) -> trimesh.Trimesh:
