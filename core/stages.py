@@ -2,14 +2,17 @@
 
 Each stage is a frozen dataclass of read-only numpy arrays that saves to and loads from
 its ``.npz`` file in a job directory. Nothing mutates a stage in place: a later stage is a
-new value computed from earlier ones.
+new value computed from earlier ones. Each array is declared once, as a ``column`` (dtype and
+row shape); the file's schema and the dtypes follow from that declaration.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, fields
+from enum import IntEnum
 from pathlib import Path
-from typing import ClassVar, Self
+from typing import Any, ClassVar, NamedTuple, Self
 
 import numpy as np
 
@@ -32,12 +35,44 @@ def _frozen(arr: np.ndarray, dtype: type | np.dtype) -> np.ndarray:
     return out
 
 
+class Column(NamedTuple):
+    """One array of a stage file: its dtype and the shape of one row (``()``: a scalar)."""
+
+    dtype: type
+    row: tuple[int, ...] = ()
+
+    @property
+    def schema(self) -> tuple[int, str, tuple[int, ...] | None]:
+        """(ndim, accepted dtype kinds, trailing shape or None) as ``load_npz`` checks it; a
+        file may hold any integer width where the stage keeps integers."""
+        kind = np.dtype(self.dtype).kind
+        return (1 + len(self.row), "iu" if kind in "iu" else kind, self.row or None)
+
+
+def column(dtype: type, *row: int) -> Any:
+    """Declare a stage array: ``vertices: np.ndarray = column(np.float64, 3)`` is an (n, 3)
+    float64 array (a dataclass field without default; ``Stage`` reads the declaration)."""
+    return dataclasses.field(metadata={"column": Column(dtype, tuple(row))})
+
+
 class Stage:
-    """Base of the pipeline stages: save/load of the stage file (FILE, SCHEMA, DTYPES)."""
+    """Base of the pipeline stages: save/load of the stage file (FILE, SCHEMA, DTYPES).
+
+    A subclass declares its arrays with ``column``; SCHEMA and DTYPES are derived from those
+    declarations (a subclass may still set both by hand).
+    """
 
     FILE: ClassVar[str]
     SCHEMA: ClassVar[Schema]
     DTYPES: ClassVar[dict[str, type]]
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        columns = {name: value.metadata["column"] for name, value in vars(cls).items()
+                   if isinstance(value, dataclasses.Field) and "column" in value.metadata}
+        if columns:
+            cls.SCHEMA = {name: c.schema for name, c in columns.items()}
+            cls.DTYPES = {name: c.dtype for name, c in columns.items()}
 
     def _freeze(self) -> None:
         for f in fields(self):  # type: ignore[arg-type]
@@ -94,12 +129,10 @@ class TetMesh(Stage):
         tets: (T, 4) int32, vertex indices, positively oriented (det of edges > 0).
     """
 
-    vertices: np.ndarray
-    tets: np.ndarray
+    vertices: np.ndarray = column(np.float64, 3)
+    tets: np.ndarray = column(np.int32, 4)
 
     FILE: ClassVar[str] = "tetmesh.npz"
-    SCHEMA: ClassVar[Schema] = {"vertices": (2, "f", (3,)), "tets": (2, "iu", (4,))}
-    DTYPES: ClassVar[dict[str, type]] = {"vertices": np.float64, "tets": np.int32}
 
     def __post_init__(self) -> None:
         self._freeze()
@@ -129,12 +162,10 @@ class Field(Stage):
         iso: (L,) float64, iso-value of each layer, increasing in print order.
     """
 
-    g: np.ndarray
-    iso: np.ndarray
+    g: np.ndarray = column(np.float64)
+    iso: np.ndarray = column(np.float64)
 
     FILE: ClassVar[str] = "field.npz"
-    SCHEMA: ClassVar[Schema] = {"g": (1, "f", None), "iso": (1, "f", None)}
-    DTYPES: ClassVar[dict[str, type]] = {"g": np.float64, "iso": np.float64}
 
     def __post_init__(self) -> None:
         self._freeze()
@@ -156,27 +187,13 @@ class Layers(Stage):
         vertex_direction: (n, 3) float64, unit printing direction (normalised field gradient).
     """
 
-    vertices: np.ndarray
-    faces: np.ndarray
-    face_layer: np.ndarray
-    vertex_height: np.ndarray
-    vertex_direction: np.ndarray
+    vertices: np.ndarray = column(np.float64, 3)
+    faces: np.ndarray = column(np.int32, 3)
+    face_layer: np.ndarray = column(np.int32)
+    vertex_height: np.ndarray = column(np.float64)
+    vertex_direction: np.ndarray = column(np.float64, 3)
 
     FILE: ClassVar[str] = "layers.npz"
-    SCHEMA: ClassVar[Schema] = {
-        "vertices": (2, "f", (3,)),
-        "faces": (2, "iu", (3,)),
-        "face_layer": (1, "iu", None),
-        "vertex_height": (1, "f", None),
-        "vertex_direction": (2, "f", (3,)),
-    }
-    DTYPES: ClassVar[dict[str, type]] = {
-        "vertices": np.float64,
-        "faces": np.int32,
-        "face_layer": np.int32,
-        "vertex_height": np.float64,
-        "vertex_direction": np.float64,
-    }
 
     def __post_init__(self) -> None:
         self._freeze()
@@ -225,8 +242,21 @@ class LayerMesh:
     direction: np.ndarray
 
 
-PATTERN_CONTOUR = 0
-PATTERN_STRIPE = 1
+class Pattern(IntEnum):
+    """The fill pattern of a waypoint's layer, as ``toolpath.npz`` stores it (int8).
+
+    An ``IntEnum``: the stored values stay the integers of design.md and numpy arrays compare
+    with the members directly (``toolpath.pattern == Pattern.STRIPE``); ``label`` is the
+    name reports use.
+    """
+
+    CONTOUR = 0  # boundary-conformal contours (paper section 4.3)
+    STRIPE = 1  # parallel stripes
+
+    @property
+    def label(self) -> str:
+        """"contour" or "stripe" (report.json keys)."""
+        return self.name.lower()
 
 
 @dataclass(frozen=True, eq=False)
@@ -242,42 +272,20 @@ class Toolpath(Stage):
         width: (N,) float64, mm, target toolpath width W.
         speed: (N,) float64, mm/s, nozzle speed v.
         extrude: (N,) bool, False = travel without deposition.
-        pattern: (N,) int8, 0 = boundary-conformal contour, 1 = stripe.
+        pattern: (N,) int8, a ``Pattern``: 0 = boundary-conformal contour, 1 = stripe.
     """
 
-    position: np.ndarray
-    normal: np.ndarray
-    layer: np.ndarray
-    path: np.ndarray
-    height: np.ndarray
-    width: np.ndarray
-    speed: np.ndarray
-    extrude: np.ndarray
-    pattern: np.ndarray
+    position: np.ndarray = column(np.float64, 3)
+    normal: np.ndarray = column(np.float64, 3)
+    layer: np.ndarray = column(np.int32)
+    path: np.ndarray = column(np.int32)
+    height: np.ndarray = column(np.float64)
+    width: np.ndarray = column(np.float64)
+    speed: np.ndarray = column(np.float64)
+    extrude: np.ndarray = column(np.bool_)
+    pattern: np.ndarray = column(np.int8)
 
     FILE: ClassVar[str] = "toolpath.npz"
-    SCHEMA: ClassVar[Schema] = {
-        "position": (2, "f", (3,)),
-        "normal": (2, "f", (3,)),
-        "layer": (1, "iu", None),
-        "path": (1, "iu", None),
-        "height": (1, "f", None),
-        "width": (1, "f", None),
-        "speed": (1, "f", None),
-        "extrude": (1, "b", None),
-        "pattern": (1, "iu", None),
-    }
-    DTYPES: ClassVar[dict[str, type]] = {
-        "position": np.float64,
-        "normal": np.float64,
-        "layer": np.int32,
-        "path": np.int32,
-        "height": np.float64,
-        "width": np.float64,
-        "speed": np.float64,
-        "extrude": np.bool_,
-        "pattern": np.int8,
-    }
 
     def __post_init__(self) -> None:
         self._freeze()
@@ -316,6 +324,6 @@ class Toolpath(Stage):
         for name in ("layer", "path"):
             if getattr(self, name).min() < 0:
                 return f"'{name}' holds a negative index"
-        if not np.isin(self.pattern, (PATTERN_CONTOUR, PATTERN_STRIPE)).all():
+        if not np.isin(self.pattern, list(Pattern)).all():
             return "'pattern' holds a value other than 0 (contour) or 1 (stripe)"
         return ""

@@ -21,12 +21,10 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from core.errors import InputError
+from core.status import JobState
 
-STATES = (
-    "submitted", "sliced", "planned", "ready_check", "printing", "paused", "interrupted", "done",
-    "failed", "aborted",
-)
-FINAL = frozenset({"done", "failed", "aborted"})
+STATES = tuple(JobState)
+FINAL = frozenset(s for s in JobState if s.final)
 TRANSITIONS: dict[str, frozenset[str]] = {
     "submitted": frozenset({"sliced", "failed", "aborted"}),
     "sliced": frozenset({"planned", "failed", "aborted"}),

@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from core.errors import InputError
-from core.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
+from core.stages import Pattern, Toolpath
 from sim.deposition import Morphology
 
 VOLUME_MATCHING_BETA = float(np.sqrt(np.pi) / 2.0)
@@ -228,11 +228,11 @@ def planar_toolpath(vertices: NDArray[np.float64], faces: NDArray[np.integer],
         out = []
         for poly in _perimeters(sdf, x, y, width, config) + walls:
             pts = _resample(poly, config.spacing_mm)
-            out.append((np.column_stack([pts, np.full(len(pts), z)]), k, PATTERN_CONTOUR))
+            out.append((np.column_stack([pts, np.full(len(pts), z)]), k, Pattern.CONTOUR))
         angle = np.deg2rad(config.raster_angle_deg) + 0.5 * np.pi * (k % 2)
         for seg in _raster(sdf, x, y, width, config, along_x=abs(np.cos(angle)) > 0.5, flip=k):
             pts = _resample(seg, config.spacing_mm)
-            out.append((np.column_stack([pts, np.full(len(pts), z)]), k, PATTERN_STRIPE))
+            out.append((np.column_stack([pts, np.full(len(pts), z)]), k, Pattern.STRIPE))
         return out
 
     # Layers are independent and the distance transforms release the GIL: threads, in order.

@@ -61,6 +61,7 @@ from numpy.typing import NDArray
 from core.errors import InputError
 from core.progress import NullProgress, Progress
 from core.stages import Toolpath
+from core.status import DepositionStatus
 from core.tolerance import tol
 from sim import deposition_kernels as kernels
 from sim.voxels import MAX_VOXELS, VoxelGrid
@@ -287,7 +288,8 @@ class Deposit:
         layer: (nx, ny, nz) int32, the layer that brought most of the voxel's ink (the last
             one whose addition exceeded what the voxel held), -1 = none.
         commanded_mm3: float, sum of C * dt over extruding segments.
-        status: "ok", or "overfull" when some excess found no free voxel (see ``trace``).
+        status: ``DepositionStatus.OK``, or ``OVERFULL`` when some excess found no free voxel
+            (see ``trace``).
         trace: one ChunkTrace per chunk, in print order.
         timings: stage name -> seconds: segments (and the grid), rasterise (in a worker
             thread, overlapped with the spreading), wait (for the worker, and adding the ink),
@@ -299,7 +301,7 @@ class Deposit:
     fill: NDArray[np.float32]
     layer: NDArray[np.int32]
     commanded_mm3: float
-    status: str
+    status: DepositionStatus
     trace: tuple[ChunkTrace, ...]
     timings: dict[str, float] = field(default_factory=dict)
     segments: int = 0
@@ -392,7 +394,8 @@ def deposit(toolpath: Toolpath, morphology: Morphology,
     residual = sum(t.residual_mm3 for t in traces)
     fill.setflags(write=False)
     tags.setflags(write=False)
-    status = "ok" if residual <= 1e-6 * max(float(seg.volume.sum()), 1.0) else "overfull"
+    status = (DepositionStatus.OK if residual <= 1e-6 * max(float(seg.volume.sum()), 1.0)
+              else DepositionStatus.OVERFULL)
     return Deposit(grid=grid, fill=fill, layer=tags, commanded_mm3=float(seg.volume.sum()),
                    status=status, trace=tuple(traces), timings=timings, segments=total)
 

@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.errors import InputError
-from core.stages import MAX_COORDINATE_MM, PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
+from core.stages import MAX_COORDINATE_MM, Pattern, Toolpath
 from slicer.extrusion import factory_rate
 
 MAX_GCODE_BYTES = 256 << 20  # a G-code file larger than this is refused before it is read
@@ -91,7 +91,7 @@ def parse_gcode(text: str, options: GcodeOptions | None = None,
     feed = 1500.0  # mm/min, a common firmware default until the file sets F
     unit = 1.0
     abs_xyz, abs_e = True, True
-    kind = PATTERN_STRIPE
+    kind = Pattern.STRIPE
     last_motion: float | None = None
     # One row per extruding move: start xyz, end xyz, volume, feed, pattern.
     rows: list[tuple[float, float, float, float, float, float, float, float, int]] = []
@@ -100,7 +100,7 @@ def parse_gcode(text: str, options: GcodeOptions | None = None,
         comment = line[1].strip() if len(line) > 1 else ""
         if comment.upper().startswith("TYPE:"):
             label = comment[5:].strip().upper()
-            kind = PATTERN_CONTOUR if any(t in label for t in _CONTOUR_TYPES) else PATTERN_STRIPE
+            kind = Pattern.CONTOUR if any(t in label for t in _CONTOUR_TYPES) else Pattern.STRIPE
         code = re.sub(r"\([^)]*\)", " ", line[0]).strip()
         if not code:
             continue

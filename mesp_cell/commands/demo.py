@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, NamedTuple
 
 from core.errors import InputError
+from core.status import JobState
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 DEFAULT_EXAMPLE = "hemisphere"
@@ -112,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
                 say.line(f"job {job.id} waits for the tank-ready confirmation: press 'Tank "
                          f"ready' in the console ({urls[0]})")
                 client.wait(job.id, timeout=1e9, until=frozenset(
-                    {"printing", "paused", "interrupted", "done", "failed", "aborted"}))
+                    {JobState.PRINTING, JobState.PAUSED, JobState.INTERRUPTED, JobState.DONE,
+                     JobState.FAILED, JobState.ABORTED}))
             else:
                 client.confirm_ready(job.id, timeout=args.timeout, who="mesp demo")
                 say.line("tank confirmed ready (the twin's tank is virtual)")
@@ -132,7 +134,7 @@ def run(args: argparse.Namespace) -> int:
             client.close()
     say.end_progress()
     elapsed = time.monotonic() - t0
-    if done.state != "done":
+    if done.state != JobState.DONE:
         print(f"mesp demo: job {done.id} ended {done.state}: {done.reason}", file=sys.stderr)
         print(f"logs: {home / 'logs'}", file=sys.stderr)
         return 1
@@ -285,13 +287,13 @@ class _Printer:
 
     def progress(self, job: Any) -> None:
         text = f"  {job.state:<9} layer {job.layer + 1}/{job.layers}  {job.percent:5.1f}%"
-        if job.state == "printing" and job.eta_s > 0:
+        if job.state == JobState.PRINTING and job.eta_s > 0:
             from mesp_cell.commands.job import hmm
 
             text += f"  ETA {hmm(job.eta_s)}"
         text += f"  {job.volume:8.0f} mm^3"
         now = time.monotonic()
-        if job.state in ("printing", "done"):
+        if job.state in (JobState.PRINTING, JobState.DONE):
             if self._print_start is None:
                 self._print_start = now
             self._print_end = now

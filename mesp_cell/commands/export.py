@@ -73,6 +73,7 @@ def _csv(job: Path, args: argparse.Namespace) -> str:
 
 
 def _urscript(job: Path, args: argparse.Namespace) -> str:
+    from planner.status import PlanStatus
     from planner.trajectory import Trajectory
     from sim.urscript import ExtruderIO, urscript
     from slicer.extrusion import load_job_profile
@@ -81,8 +82,8 @@ def _urscript(job: Path, args: argparse.Namespace) -> str:
     if not (job / "trajectory.npz").is_file():
         raise InputError(f"{job} has no trajectory.npz", f"run `mesp plan {job}` first")
     report = read_report(job)
-    status = report.get("plan", {}).get("status", "ok")
-    if status != "ok":
+    status = report.get("plan", {}).get("status", PlanStatus.OK)
+    if status != PlanStatus.OK:
         raise InputError(f"the plan in {job} cannot be executed ({status})",
                          f"fix the plan (see plan in {job / 'report.json'}) and re-run mesp plan")
     if args.max_step < 0.002:

@@ -8,6 +8,7 @@ import time
 from pathlib import Path
 
 from core.errors import InputError
+from core.status import JobState
 from mesp_cell.jobs import FINAL, JobRecord
 
 
@@ -72,7 +73,7 @@ def line(job: JobRecord) -> str:
     if job.samples:
         layer = f"{job.layer + 1}/{job.layers}" if job.layer >= 0 else f"-/{job.layers}"
         text += f" layer {layer:>7}  {job.percent:5.1f}%"
-        if job.state == "printing" and job.eta_s > 0:
+        if job.state == JobState.PRINTING and job.eta_s > 0:
             finish = time.strftime("%H:%M", time.localtime(time.time() + job.eta_s))
             text += f"  ETA {hmm(job.eta_s)} (done ~{finish})"
         text += f"  {job.volume:8.1f} mm^3"
@@ -137,13 +138,14 @@ def _follow(client, job_id: str) -> int:  # type: ignore[no-untyped-def]
         if text != last:
             print(text + ("\x1b[K\r" if tty else "\n"), end="", flush=True)
             last = text
-        if job.state in FINAL or (job.state in ("paused", "interrupted") and not job.resume):
+        if job.state in FINAL or (job.state in (JobState.PAUSED, JobState.INTERRUPTED)
+                                  and not job.resume):
             break
         time.sleep(0.5)
         job = client.status(job_id)
     if tty:
         print()
-    return 0 if job.state == "done" else 1
+    return 0 if job.state == JobState.DONE else 1
 
 
 def export(args: argparse.Namespace) -> int:

@@ -11,6 +11,7 @@ from core.errors import InputError
 from mesp_cell.console import ConsoleProgress
 from slicer.checks import critical_line, job_notes
 from slicer.config import JobConfig, load_job
+from slicer.report import SliceSummary
 
 HELP = """\
 Slice a solid model into curved layers and a width-constrained toolpath (paper section 4).
@@ -125,12 +126,7 @@ def run(args: argparse.Namespace) -> int:
         from slicer.repair import repair_offer
 
         raise repair_offer(args.model, job.model, exc) from exc
-    summary = {
-        "layers": report.get("slicing", {}).get("layers"),
-        "waypoints": report.get("toolpath", {}).get("waypoints"),
-        "volume_error": report.get("toolpath", {}).get("volume_error"),
-        "total_s": report.get("timing_s", {}).get("total"),
-    }
+    summary = SliceSummary.of(report).as_dict()
     progress.info(f"done: {json.dumps(summary)}; report in {args.out / 'report.json'}")
     line = critical_line(report)
     if line is not None:

@@ -48,9 +48,8 @@ def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
         raise InputError(f"model {model} does not exist", "check the path")
     job = load_job(Path(job_file) if job_file else None)
     job = job.with_overrides(extrusion={"profile": profiles.resolve(job.extrusion.profile, cell)})
-    fn = getattr(pipeline, "slice_job", None) or pipeline.slice_model
     alpha = load_cell(Path(cell_file) if cell_file else None).planning.alpha_range
-    report: dict[str, Any] = fn(model, Path(out_dir), job, alpha=alpha)
+    report = pipeline.slice_model(model, Path(out_dir), job, alpha=alpha)
     _check_volume(report)
     return report
 
@@ -60,15 +59,16 @@ def _check_volume(report: dict[str, Any]) -> None:
     limit (``slicer.checks.VOLUME_ERROR``) is refused before planning, with the slicer's note
     (its cause and fix): the cell never prints a part it knows is out of tolerance."""
     from slicer.checks import VOLUME_ERROR, job_notes
+    from slicer.report import SliceSummary
 
-    error = report.get("toolpath", {}).get("volume_error")
-    if error is None or abs(float(error)) <= VOLUME_ERROR:
+    error = SliceSummary.of(report).volume_error
+    if error is None or abs(error) <= VOLUME_ERROR:
         return
     note = next((n for n in job_notes(report) if "deposited volume" in n), "")
     fix = note.split("fix: ", 1)[1] if "fix: " in note else (
         "see toolpath.per_layer in report.json; scale the model (--scale-to) or change the "
         "layer height")
-    raise InputError(f"the toolpath deposits {100 * float(error):+.1f}% of the model's volume "
+    raise InputError(f"the toolpath deposits {100 * error:+.1f}% of the model's volume "
                      f"(limit {100 * VOLUME_ERROR:g}%)", fix)
 
 
@@ -82,13 +82,14 @@ def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
     from core.stages import Toolpath
     from planner.cell import load_cell
     from planner.plan import plan
+    from planner.status import PlanStatus
     from slicer.report import update_report
 
     job_dir = Path(job_dir)
     toolpath = Toolpath.load(job_dir)
     cell = load_cell(Path(cell_file) if cell_file else None)
     result = plan(toolpath, cell)
-    if result.status != "ok":
+    if result.status is not PlanStatus.OK:
         raise InputError(f"plan refused ({result.status}): {result.message}",
                          "move the model (cell [placement]) or change the job")
     result.trajectory.save(job_dir)

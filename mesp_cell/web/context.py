@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from core.status import JobState
 from mesp_cell.bus.session import Bus
 from mesp_cell.jobs import FINAL, JobRecord, JobStore
 from mesp_cell.web.live import LiveState
@@ -58,7 +59,7 @@ def job_json(job: JobRecord, history: list[tuple[float, str, str, str]] | None =
         "id": job.id, "state": job.state, "reason": job.reason, "model": Path(job.model).name,
         "created": job.created, "updated": job.updated, "layer": job.layer,
         "layers": job.layers, "waypoint": job.waypoint, "waypoints": job.waypoints,
-        "percent": job.percent, "eta_s": job.eta_s if job.state == "printing" else None,
+        "percent": job.percent, "eta_s": job.eta_s if job.state == JobState.PRINTING else None,
         "ink_mm3": job.volume, "resume_pending": bool(job.resume),
         "ready_confirmed": bool(job.ready), "final": job.state in FINAL}
     if history is not None:

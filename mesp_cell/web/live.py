@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from core.status import JobState
 from mesp_cell.drivers.stream import StreamPlan
 from mesp_cell.messages import FAULT_ESTOP, ExtruderState, JobProgress, RobotState
 
@@ -159,7 +160,7 @@ class LiveState:
             rec = job_of(prog.job_id)
             if rec is not None:
                 job["state"] = rec.state
-                if rec.state == "done":
+                if rec.state == JobState.DONE:
                     job.update(percent_time=100.0, eta_s=0.0, ink_mm3=rec.volume)
                 plan = self.plan_of(prog.job_id, Path(rec.dir))
                 job["ink_planned_mm3"] = _num(plan.ink_mm3) if plan.ink_mm3 > 0 else None

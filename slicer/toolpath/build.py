@@ -65,7 +65,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.progress import Progress
-from core.stages import PATTERN_CONTOUR, PATTERN_STRIPE, LayerMesh, Layers, Toolpath
+from core.stages import LayerMesh, Layers, Pattern, Toolpath
 from core.tolerance import tol
 from slicer.config import JobConfig, ToolpathConfig
 from slicer.extrusion import ExtrusionProfile
@@ -103,7 +103,7 @@ from slicer.toolpath.volume import (
     segment_volume,
 )
 
-PATTERN_NAMES = {PATTERN_CONTOUR: "contour", PATTERN_STRIPE: "stripe"}
+PATTERN_NAMES = {Pattern.CONTOUR: "contour", Pattern.STRIPE: "stripe"}
 DEFORM_SPREAD = 0.01  # relative W spread above which the layer is deformed (eqs. 13, 14)
 SERIAL_BELOW = 4  # fewer layers than this are processed in the calling process
 THIN_SHORTFALL = 0.25  # volume error beyond this after matching -> try the thin-band options
@@ -125,7 +125,7 @@ LONE_LINE = 2.0  # no other line within this x W: the line fills its band alone 
 
 def layer_pattern(index: int, first: str) -> int:
     """Pattern of layer ``index``: ``first`` on even layers, the other on odd (Fig. 3d)."""
-    first_code = PATTERN_CONTOUR if first == "contour" else PATTERN_STRIPE
+    first_code = Pattern.CONTOUR if first == "contour" else Pattern.STRIPE
     return first_code if index % 2 == 0 else 1 - first_code
 
 
@@ -428,14 +428,14 @@ class _Surface:
         stripes: their local spacing 2 pi / |grad psi| is off next to the ends
         trim_converging cuts back (tried: the membrane's and the aorta's prints kept more
         gel; README, session 11)."""
-        if pattern == PATTERN_STRIPE and self.wall_half_width > 0.0:
+        if pattern == Pattern.STRIPE and self.wall_half_width > 0.0:
             # the walls' centre lines as wide as the wall, the stripes at W
             centre = self.centre_scale(spacing)
             if centre is None:
                 return None
             wall = self.reach(self.wall_half_width) > self.wall_half_width
             return np.where(wall, centre, 1.0)
-        sides = self.sides() if self.fit_bands and pattern == PATTERN_CONTOUR else None
+        sides = self.sides() if self.fit_bands and pattern == Pattern.CONTOUR else None
         if sides is None or self.fill_holes:
             return None
         pitch, _ = self.band_pitch(spacing)
@@ -565,7 +565,7 @@ class _Surface:
         distance where the component is narrower than one spacing (a thin band then still
         gets a loop along its middle).
         """
-        if pattern == PATTERN_CONTOUR:
+        if pattern == Pattern.CONTOUR:
             from slicer.toolpath.contours import contour_lines
 
             sides = self.sides() if self.fit_bands else None
@@ -785,7 +785,7 @@ class _Component:
             joiner.prefetch(np.concatenate([ids.start, np.maximum(ids.stop - 1, ids.start)]))
         pieces = order_lines(lines, start, level, spacing, factor * w_rs, joiner.can_join,
                              closed_first=self.cfg.stripe_perimeter
-                             and self.pattern == PATTERN_STRIPE)
+                             and self.pattern == Pattern.STRIPE)
         linked = link_pieces(lines, pieces, self.vertices, self.faces, self.graph, w_rs,
                              lifter, lift, factor, joiner)
         return _Built(lines, linked, self._waypoints(linked, scale), scale=scale)
@@ -857,7 +857,7 @@ def _component_toolpath_unsafe(
     timings["deform"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    perimeter = cfg.stripe_perimeter and pattern == PATTERN_STRIPE
+    perimeter = cfg.stripe_perimeter and pattern == Pattern.STRIPE
     surf = _Surface(deformed, comp.faces, cfg.fit_bands, perimeter, cfg.boundary_distance)
     timings["distance"] = time.perf_counter() - t0
 
@@ -868,8 +868,8 @@ def _component_toolpath_unsafe(
             join: float | None = None) -> VolumeMatch[_Built]:
         """Lines of pattern ``used`` on ``surface``, volume-matched; with a fixed ``tau``
         only the lines (no linking: for the baseline width measurements)."""
-        level_of = surface.contour_level() if used == PATTERN_CONTOUR else None
-        trim_of = surface.distance if used == PATTERN_STRIPE else None
+        level_of = surface.contour_level() if used == Pattern.CONTOUR else None
+        trim_of = surface.distance if used == Pattern.STRIPE else None
 
         def evaluate(t: float) -> tuple[float, _Built]:
             spacing = t * comp.w_mean
@@ -952,27 +952,27 @@ def _component_toolpath_unsafe(
 
     used = pattern
     fallback = ""
-    if (pattern == PATTERN_STRIPE
+    if (pattern == Pattern.STRIPE
             and surf.mostly_narrow(0.5 * NARROW_STRIPES * comp.w_mean, NARROW_SHARE)):
         # stripes across a band this narrow are shorter than W once their ends are cut back
         # by W / 2: a zig-zag of stubs and connectors. A component that is mostly such a
         # band (a thin wall, a tube's shell, with or without a wider spot) is printed as on
         # a contour layer; there is no across-the-band direction to stagger anyway.
-        used, fallback = PATTERN_CONTOUR, "contour"
+        used, fallback = Pattern.CONTOUR, "contour"
     # partly such walls (a junction between two tubes): also tried with stripes on the wide
     # part only and the walls' centre lines (``_Surface.narrow_walls``)
-    walls = (used == PATTERN_STRIPE and cfg.fit_bands
+    walls = (used == Pattern.STRIPE and cfg.fit_bands
              and surf.narrow_share(0.5 * NARROW_STRIPES * comp.w_mean, WALL_SHARE) >= WALL_SHARE
              and surf.sides() is not None)
     # contours with fit_bands: a band narrower than 1.5 W everywhere holds round(b / W) = 1
     # line, the centre line, whose width is then fitted to the band (centre_match)
-    thin = 0.5 * THIN_BAND_FIT if cfg.fit_bands and used == PATTERN_CONTOUR else THIN_BAND
+    thin = 0.5 * THIN_BAND_FIT if cfg.fit_bands and used == Pattern.CONTOUR else THIN_BAND
     centre = surf.centre_lines() if surf.max_distance < thin * comp.w_mean else None
     if centre is not None and centre.n_lines:
         # A band with holes at most about one width wide holds one line: along its middle.
-        match, used, fallback = centre_match(centre), PATTERN_CONTOUR, "centre-line"
+        match, used, fallback = centre_match(centre), Pattern.CONTOUR, "centre-line"
     else:
-        no_band = used == PATTERN_CONTOUR and surf.fill_band_fit_holes(comp.w_mean)
+        no_band = used == Pattern.CONTOUR and surf.fill_band_fit_holes(comp.w_mean)
         if no_band:
             fallback = fallback or "holes-filled"
         match = run_joined(surf, used)
@@ -1001,11 +1001,11 @@ def _component_toolpath_unsafe(
         # back by W / 2, contours come out as a doubled loop. Try the other pattern and a
         # single line along the middle (bands with holes); keep the closest volume.
         options = [(match, used, fallback)]
-        if used == PATTERN_STRIPE:
-            options.append((run(surf, PATTERN_CONTOUR), PATTERN_CONTOUR, "contour"))
+        if used == Pattern.STRIPE:
+            options.append((run(surf, Pattern.CONTOUR), Pattern.CONTOUR, "contour"))
         centre = surf.centre_lines() if centre is None else centre
         if centre.n_lines:
-            options.append((centre_match(centre), PATTERN_CONTOUR, "centre-line"))
+            options.append((centre_match(centre), Pattern.CONTOUR, "centre-line"))
         match, used, fallback = min(options, key=lambda o: abs(o[0].rel_error))
     if abs(match.rel_error) > FLOW_FIT_ABOVE and fallback != "centre-line":
         # The line count is discrete (a band of 1.7 W holds 2 lines, not 1.7): where no
@@ -1032,13 +1032,13 @@ def _component_toolpath_unsafe(
             direct = _Surface(comp.vertices, comp.faces,
                               cfg.fit_bands and fallback != "no-band", perimeter,
                               cfg.boundary_distance)
-            if used == PATTERN_CONTOUR:
+            if used == Pattern.CONTOUR:
                 direct.fill_band_fit_holes(comp.w_mean)
             direct.wall_half_width = surf.wall_half_width
             b = run(direct, used, match.tau).result
         # the baselines' lines would print at the same flow as the component's
         err_undeformed = measure(b.lines, built.flow, b.scale).error
-        if used == PATTERN_STRIPE:
+        if used == Pattern.STRIPE:
             pb = run(surf, used, match.tau, poisson=True).result
             err_poisson = measure(pb.lines, built.flow).error
     timings["baselines"] = time.perf_counter() - t0

@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from core.errors import InputError
-from core.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Toolpath
+from core.stages import Pattern, Toolpath
 from sim.baseline import (
     VOLUME_MATCHING_BETA,
     PlanarConfig,
@@ -60,14 +60,14 @@ def test_box_is_sliced_into_alternating_rasters_with_perimeters() -> None:
     w = float(tp.width[0])
     assert w == pytest.approx(morph.rate_mm3_s / (0.6 * tp.speed[0]), rel=1e-9)
     for k in (0, 1):
-        on = (tp.layer == k) & (tp.pattern == PATTERN_STRIPE)
+        on = (tp.layer == k) & (tp.pattern == Pattern.STRIPE)
         p = tp.position[on]
         lines = [p[tp.path[on] == i] for i in np.unique(tp.path[on])]
         spans = np.array([np.ptp(line, axis=0)[:2] for line in lines])
         along = 0 if k == 0 else 1
         assert np.all(spans[:, along] > 1.0) and np.allclose(spans[:, 1 - along], 0.0)
     # The perimeter runs half a line width inside the faces.
-    per = tp.position[(tp.layer == 3) & (tp.pattern == PATTERN_CONTOUR)]
+    per = tp.position[(tp.layer == 3) & (tp.pattern == Pattern.CONTOUR)]
     d_face = np.minimum.reduce([per[:, 0], 6.0 - per[:, 0], per[:, 1], 6.0 - per[:, 1]])
     assert np.median(d_face) == pytest.approx(0.5 * w, abs=0.05)
 
@@ -165,7 +165,7 @@ def test_thin_tube_wall_gets_one_centre_line() -> None:
     assert w > r2 - r1
     r = np.linalg.norm(tp.position[:, :2], axis=1)
     assert np.all(np.abs(r - 0.5 * (r1 + r2)) < 0.1)
-    assert np.all(tp.pattern == PATTERN_CONTOUR)
+    assert np.all(tp.pattern == Pattern.CONTOUR)
     length = sum(np.linalg.norm(np.diff(tp.position[tp.path == i], axis=0), axis=1).sum()
                  for i in np.unique(tp.path))
     assert length * w * h == pytest.approx(tube.volume * w / (r2 - r1), rel=0.05)

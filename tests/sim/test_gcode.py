@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from core.errors import InputError
-from core.stages import PATTERN_CONTOUR, PATTERN_STRIPE
+from core.stages import Pattern
 from sim.gcode import GcodeOptions, align_to_bounds, parse_gcode, read_gcode
 
 VOLUMETRIC = GcodeOptions(filament_diameter_mm=0.0, rate_mm3_s=6.0)
@@ -39,8 +39,8 @@ def test_absolute_moves_two_layers_and_travel() -> None:
     assert np.allclose(tp.height, 0.5)
     assert np.allclose(tp.width[:3], 1.0)  # 5 mm^3 / (10 mm * 0.5 mm)
     assert np.allclose(tp.width[3:5], 0.6)
-    assert tp.pattern[:3].tolist() == [PATTERN_CONTOUR] * 3
-    assert tp.pattern[3:].tolist() == [PATTERN_STRIPE] * 4
+    assert tp.pattern[:3].tolist() == [Pattern.CONTOUR] * 3
+    assert tp.pattern[3:].tolist() == [Pattern.STRIPE] * 4
     # Speed "volume": the cell's constant rate delivers exactly the G-code's volume.
     assert np.allclose(tp.speed * tp.width * tp.height, 6.0)
     assert np.allclose(tp.normal, [0, 0, 1])

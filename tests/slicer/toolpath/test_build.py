@@ -9,7 +9,7 @@ import pytest
 from numpy.typing import NDArray
 from scipy.spatial import Delaunay, cKDTree
 
-from core.stages import PATTERN_CONTOUR, PATTERN_STRIPE, Layers
+from core.stages import Layers, Pattern
 from slicer.config import JobConfig
 from slicer.extrusion import load_profile
 from slicer.toolpath.build import ToolpathResult, compute_toolpath, layer_pattern
@@ -126,8 +126,8 @@ def test_waypoints_on_flat_layers_with_unit_normals(discs: tuple[Layers, Toolpat
     assert set(np.unique(tp.layer)) == {0, 1, 2, 3}
     assert np.all(np.diff(tp.layer) >= 0)
     assert np.all(np.diff(tp.path) >= 0)
-    assert np.all(tp.pattern[tp.layer % 2 == 0] == PATTERN_CONTOUR)
-    assert np.all(tp.pattern[tp.layer % 2 == 1] == PATTERN_STRIPE)
+    assert np.all(tp.pattern[tp.layer % 2 == 0] == Pattern.CONTOUR)
+    assert np.all(tp.pattern[tp.layer % 2 == 1] == Pattern.STRIPE)
 
 
 def test_width_follows_eq4(discs: tuple[Layers, ToolpathResult]) -> None:
@@ -301,7 +301,7 @@ def test_stripes_stop_half_a_width_inside() -> None:
     config = JobConfig().with_overrides(toolpath={"stripe_perimeter": False})
     tp = compute_toolpath(disc_stack(2), config, PROFILE, measure_baselines=False,
                           workers=1).toolpath
-    sel = tp.extrude & (tp.pattern == PATTERN_STRIPE)
+    sel = tp.extrude & (tp.pattern == Pattern.STRIPE)
     gap = 12.0 - np.linalg.norm(tp.position[sel, :2], axis=1)
     # the outermost material band (W / 2 each side of the line) ends at the boundary; a
     # short stripe is cut back by at most a quarter of its length per end
@@ -321,7 +321,7 @@ def test_stripe_layer_has_a_perimeter_loop(discs_perimeter: ToolpathResult) -> N
         if stat["pattern"] != "stripe":
             continue
         sel = tp.extrude & (tp.layer == stat["layer"])
-        assert np.all(tp.pattern[sel] == PATTERN_STRIPE)
+        assert np.all(tp.pattern[sel] == Pattern.STRIPE)
         pos, w = tp.position[sel], tp.width[sel]
         half = 0.5 * stat["tau"][0] * w  # spacing / 2
         gap = 12.0 - np.linalg.norm(pos[:, :2], axis=1)
@@ -348,7 +348,7 @@ def test_narrow_band_stripes_get_no_perimeter_loop() -> None:
     runs = [compute_toolpath(layers, JobConfig().with_overrides(
         toolpath={"first_pattern": "stripe", "stripe_perimeter": on}), PROFILE,
         measure_baselines=False, workers=1).toolpath for on in (False, True)]
-    assert np.all(runs[0].pattern == PATTERN_STRIPE)
+    assert np.all(runs[0].pattern == Pattern.STRIPE)
     assert np.array_equal(runs[0].position, runs[1].position)
 
 
@@ -360,7 +360,7 @@ def test_thin_band_gets_a_centre_line() -> None:
     tp = res.toolpath
     r = np.linalg.norm(tp.position[tp.extrude, :2], axis=1)
     assert np.allclose(r, 12.0, atol=0.05)  # the middle (harmonic 1/2: 11.83, geometric mean)
-    assert np.all(tp.pattern == PATTERN_CONTOUR)
+    assert np.all(tp.pattern == Pattern.CONTOUR)
     assert res.report["extrusion_starts"]["total"] == 1
     # volume: the 4.5 mm line is narrowed to the 4 mm band by a faster nozzle (W = C / (H v)
     # still holds), so the band gets its volume, not 12 % more
@@ -415,7 +415,7 @@ def test_width_scalings_compound_within_the_limit() -> None:
 
     v, f = disc_mesh(8.0, 1.0)
     layer = split_layers(flat_layer(v, f, 1.0))[0]
-    comp = _Component(layer, np.arange(len(f)), PATTERN_CONTOUR, ToolpathConfig(), PROFILE)
+    comp = _Component(layer, np.arange(len(f)), Pattern.CONTOUR, ToolpathConfig(), PROFILE)
     nominal = PROFILE.speed_at(np.array([1.0, 1.0]))
     lo, hi = CENTRE_WIDTH_SCALE
     wide = comp.flowed_speed(nominal, hi)  # the band's width: 1.5 W
@@ -432,7 +432,7 @@ def test_narrow_band_on_a_stripe_layer_gets_contours() -> None:
     res = stripe_layer_toolpath(*disc_mesh(17.7, 0.5, inner=10.0), 1.0)
     assert res.report["thin_fallback"]["contour"] == 1
     tp = res.toolpath
-    assert np.all(tp.pattern == PATTERN_CONTOUR)
+    assert np.all(tp.pattern == Pattern.CONTOUR)
     r = np.linalg.norm(tp.position[tp.extrude, :2], axis=1)
     assert np.all((r > 10.5) & (r < 17.2))
     assert np.ptp(r) > 0.6 * 4.55  # two loops across the band
@@ -447,7 +447,7 @@ def test_narrow_band_on_a_stripe_layer_gets_contours() -> None:
     assert 0.1 < nominal < 0.25
     assert printed < 0.5 * nominal
     res = stripe_layer_toolpath(*disc_mesh(7.7, 0.5), 1.0)
-    assert np.all(res.toolpath.pattern == PATTERN_STRIPE)
+    assert np.all(res.toolpath.pattern == Pattern.STRIPE)
 
 
 def test_band_fitting_holes_are_filled_where_the_layer_is_no_band() -> None:
@@ -462,7 +462,7 @@ def test_band_fitting_holes_are_filled_where_the_layer_is_no_band() -> None:
     w = 2.33
     assert not surf.band_fit_covers(w)
     surf.fill_holes = True
-    gap = surf.line_gap(surf.lines(PATTERN_CONTOUR, w))
+    gap = surf.line_gap(surf.lines(Pattern.CONTOUR, w))
     assert surf.face_area[gap > UNCOVERED * w].sum() < 0.02 * surf.face_area.sum()
     annulus = _Surface(*disc_mesh(20.0, 0.6, inner=10.0))
     assert annulus.band_fit_covers(w)  # a band: nothing to fill
@@ -518,7 +518,7 @@ def test_stripe_layer_walls_get_their_centre_line(monkeypatch: pytest.MonkeyPatc
     outer = tp.extrude & (np.abs(tp.position[:, 0]) > 26.0 + 4.0)  # the walls' far sides
     radius = np.hypot(np.abs(tp.position[outer, 0]) - 26.0, tp.position[outer, 1])
     assert np.all(np.abs(radius - (14.0 - 1.2)) < 0.25)
-    assert np.all(tp.pattern[tp.extrude] == PATTERN_STRIPE)
+    assert np.all(tp.pattern[tp.extrude] == Pattern.STRIPE)
 
 
 def test_variable_height_on_a_curved_layer_is_deformed() -> None:
