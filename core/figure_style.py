@@ -15,6 +15,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from core.tolerance import tol
+
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
     from matplotlib.legend import Legend
@@ -74,7 +76,7 @@ def value_limits(values: np.ndarray, min_span: float) -> tuple[float, float]:
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v)]
     if v.size == 0:
-        return 0.0, max(min_span, 1e-12)
+        return 0.0, max(min_span, tol.zero)
     lo, hi = float(v.min()), float(v.max())
     if hi - lo < min_span:
         mid = 0.5 * (lo + hi)

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.tolerance import tol
 from planner import kinematics as kin
 from planner.collision import NOZZLE, segment_box_distance
 from planner.orientation import COLLISION, NO_IK, OK, REASONS, Reach
@@ -85,7 +86,7 @@ def axis_line(reach: Reach, q_end: np.ndarray, z_top_mm: float) -> np.ndarray:
     q_end = np.asarray(q_end, dtype=float)
     p, R = tip_pose(reach, q_end)
     a = R[:, 2]
-    if p[2] >= z_top_mm - 1e-9:
+    if p[2] >= z_top_mm - tol.slack:
         return q_end[None, :].copy()
     if a[2] > -DOWN_MIN:
         return np.vstack([np.full((1, 6), np.nan), q_end[None, :]])
@@ -218,7 +219,7 @@ def _safe_move_at(reach: Reach, q_from: np.ndarray, q_to: np.ndarray, z: float,
         mid = np.vstack([a, b])
     else:
         mid = joint_segment(a, b)
-    if len(mid) > 1 and not np.abs(mid[-1] - mid[0]).max() <= 1e-9:  # (nan: keep)
+    if len(mid) > 1 and not np.abs(mid[-1] - mid[0]).max() <= tol.slack:  # (nan: keep)
         parts.append(mid[1:] if parts else mid)
         segs.append(np.full(len(parts[-1]), TRANSFER, np.int8))
     if len(down) > 1:
@@ -281,7 +282,7 @@ def time_move(reach: Reach, move: SafeMove) -> Timing:
     T = kin.fk(q, reach.tool_m)
     tcp = T[:, :3, 3] * 1000.0
     keep = np.ones(len(q), dtype=bool)
-    keep[1:] = np.abs(np.diff(q, axis=0)).max(axis=1) > 1e-9
+    keep[1:] = np.abs(np.diff(q, axis=0)).max(axis=1) > tol.slack
     qk = q[keep]
     if len(qk) < 2:
         z = np.zeros(len(q))

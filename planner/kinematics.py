@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from core.tolerance import tol
+
 # UR5e e-series DH parameters, m and rad.
 D = np.array([0.1625, 0.0, 0.0, 0.1333, 0.0997, 0.0996])
 A = np.array([0.0, -0.425, -0.3922, 0.0, 0.0, 0.0])
@@ -183,7 +185,7 @@ def ik(flange: np.ndarray, branches: tuple[int, ...] = tuple(range(BRANCHES))) -
     # q1 from the wrist centre (origin of frame 5) seen from above
     p05 = p - D[5] * R[..., :, 2]
     r = np.hypot(p05[..., 0], p05[..., 1])
-    ratio = D[3] / np.maximum(r, 1e-12)
+    ratio = D[3] / np.maximum(r, tol.zero)
     ok = ratio <= 1.0
     phi = np.arccos(np.clip(ratio, -1.0, 1.0))
     q1 = (np.arctan2(p05[..., 1], p05[..., 0]))[..., None] + shoulder * phi[..., None] + np.pi / 2
@@ -191,7 +193,7 @@ def ik(flange: np.ndarray, branches: tuple[int, ...] = tuple(range(BRANCHES))) -
 
     # q5 from the flange position along the q1-normal
     c5 = (p[..., None, 0] * s1 - p[..., None, 1] * c1 - D[3]) / D[5]
-    ok = ok[..., None] & (np.abs(c5) <= 1.0 + 1e-9)
+    ok = ok[..., None] & (np.abs(c5) <= 1.0 + tol.slack)
     q5 = wrist * np.arccos(np.clip(c5, -1.0, 1.0))
     s5 = np.sin(q5)
     s5_safe = np.where(np.abs(s5) < 1e-10, 1.0, s5)
@@ -208,7 +210,7 @@ def ik(flange: np.ndarray, branches: tuple[int, ...] = tuple(range(BRANCHES))) -
     # frame 4's origin lies in the x-y plane of frame 1 (joints 2-4 rotate about z1)
     px, py = T14[..., 0, 3], T14[..., 1, 3]
     c3 = (px**2 + py**2 - A[1] ** 2 - A[2] ** 2) / (2 * A[1] * A[2])
-    ok = ok & (np.abs(c3) <= 1.0 + 1e-9)
+    ok = ok & (np.abs(c3) <= 1.0 + tol.slack)
     q3 = elbow * np.arccos(np.clip(c3, -1.0, 1.0))
     q2 = np.arctan2(py, px) - np.arctan2(A[2] * np.sin(q3), A[1] + A[2] * np.cos(q3))
     T34 = _inv(dh_transform(q2, 1) @ dh_transform(q3, 2)) @ T14

@@ -17,6 +17,7 @@ import numpy as np
 
 from core.errors import InputError
 from core.stages import Toolpath
+from core.tolerance import tol
 from planner.cell import CellConfig, pose
 from planner.orientation import (
     ALPHA,
@@ -95,8 +96,8 @@ def _fits(cell: CellConfig, box: tuple[np.ndarray, np.ndarray], offset: np.ndarr
     ex, ey = c * hx + s * hy, s * hx + c * hy
     m = cell.placement.wall_margin_mm
     ix, iy, _ = cell.tank.inner_size_mm
-    return bool(abs(offset[0]) + ex <= ix / 2 - m + 1e-9 and abs(offset[1]) + ey <= iy / 2 - m
-                + 1e-9)
+    return bool(abs(offset[0]) + ex <= ix / 2 - m + tol.slack and abs(offset[1]) + ey <= iy / 2 - m
+                + tol.slack)
 
 
 def fit_gel(cell: CellConfig, toolpath: Toolpath) -> CellConfig:
@@ -127,7 +128,7 @@ def waypoint_tangents(position: np.ndarray, path: np.ndarray) -> np.ndarray:
     prv = np.where(same_prev, np.roll(np.arange(N), 1), np.arange(N))
     t = position[nxt] - position[prv]
     n = np.linalg.norm(t, axis=1, keepdims=True)
-    return t / np.where(n > 1e-12, n, 1.0)
+    return t / np.where(n > tol.zero, n, 1.0)
 
 
 def _tangents(toolpath: Toolpath, idx: np.ndarray) -> np.ndarray:
@@ -388,8 +389,8 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
         ix, iy, _ = cell.tank.inner_size_mm
         # at most 7 x 7 grid points over the tank floor
         step = max(pc.search_step_mm, ix / 6, iy / 6)
-        xs = np.arange(-ix / 2, ix / 2 + 1e-9, step)
-        ys = np.arange(-iy / 2, iy / 2 + 1e-9, step)
+        xs = np.arange(-ix / 2, ix / 2 + tol.slack, step)
+        ys = np.arange(-iy / 2, iy / 2 + tol.slack, step)
         grid = [(float(x), float(y), best[2]) for x in xs for y in ys
                 if _fits(cell, box, np.array([x, y]), best[2])]
         if grid:

@@ -16,6 +16,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
+from core.tolerance import tol
 from slicer.mesh_io import Surface
 
 LEGEND_MAX = 8  # regions named in the legend (the command lists them all)
@@ -41,7 +42,7 @@ def critical_patches_png(surface: Surface, face_region: np.ndarray, labels: list
     # shade by the face normal so the shape reads
     tri = v[f[shown]]
     n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), tol.zero)
     lo, hi = v.min(axis=0), v.max(axis=0)
     centre, half = (lo + hi) / 2, float((hi - lo).max()) / 2
     fig = plt.figure(figsize=(10, 5), dpi=110)

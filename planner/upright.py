@@ -31,6 +31,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from core.tolerance import tol
 from planner import kinematics as kin
 from planner.orientation import Reach, alpha_within, ramp, tool_rotation, unit
 
@@ -61,7 +62,7 @@ def turn_towards(normal: np.ndarray, target: np.ndarray, angle: np.ndarray | flo
     theta = np.arccos(np.clip(np.einsum("ij,ij->i", normal, target), -1.0, 1.0))
     a = np.minimum(angle, theta)
     s = np.sin(theta)
-    ok = s > 1e-9
+    ok = s > tol.slack
     w0 = np.where(ok, np.sin(theta - a) / np.where(ok, s, 1.0), 1.0)
     w1 = np.where(ok, np.sin(a) / np.where(ok, s, 1.0), 0.0)
     return unit(w0[:, None] * normal + w1[:, None] * target)
@@ -92,7 +93,7 @@ def upright(reach: Reach, tcp: np.ndarray, normal: np.ndarray, tangent: np.ndarr
     margin = _margin(reach, tcp, normal)
     angle = np.zeros(M)
     low = np.flatnonzero(margin < COMFORT)
-    n_steps = int(np.floor(cell.planning.upright_max_deg / STEP_DEG + 1e-9))
+    n_steps = int(np.floor(cell.planning.upright_max_deg / STEP_DEG + tol.slack))
     if len(low) and n_steps:
         best = margin[low].copy()
         best_angle = np.zeros(len(low))

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.tolerance import tol
 from planner import kinematics as kin
 from planner.orientation import ALPHA_MIN_STEP_MM, Reach, alpha_of
 from planner.status import PlanStatus
@@ -144,7 +145,7 @@ def verify(traj: Trajectory, target_speed: np.ndarray, reach: Reach) -> Verifica
 
     # clearance at every sample
     clear = reach.collision.clearance(traj.q)
-    near = clear.distance < pl.clearance_mm - 1e-9
+    near = clear.distance < pl.clearance_mm - tol.slack
     k = int(np.argmin(clear.distance)) if M else -1
     min_clear = float(clear.distance[k]) if M else float("inf")
     if near.any():
@@ -158,7 +159,7 @@ def verify(traj: Trajectory, target_speed: np.ndarray, reach: Reach) -> Verifica
             reach.lo - traj.q, traj.q - reach.hi)))), 0.0, "deg beyond the limit")
     dt = np.diff(traj.t)
     vmax = np.radians(cell.robot.max_velocity_deg_s)
-    frac = (np.abs(np.diff(traj.q, axis=0)) / np.maximum(dt, 1e-12)[:, None] / vmax).max(
+    frac = (np.abs(np.diff(traj.q, axis=0)) / np.maximum(dt, tol.zero)[:, None] / vmax).max(
         axis=1) if M > 1 else np.zeros(0)
     joint_frac = float(frac.max()) if len(frac) else 0.0
     fast = frac > 1.0 + SPEED_TOL
@@ -167,10 +168,10 @@ def verify(traj: Trajectory, target_speed: np.ndarray, reach: Reach) -> Verifica
             f"{joint_frac:.2f} x the velocity limit")
 
     # TCP speed on depositing steps: never faster than asked (target varies linearly)
-    v = length / np.maximum(dt, 1e-12) if M > 1 else np.zeros(0)
+    v = length / np.maximum(dt, tol.zero) if M > 1 else np.zeros(0)
     target = 0.5 * (target_speed[:-1] + target_speed[1:])
     moving = traj.extrude[:-1] & (length > 1e-6)
-    ratio = np.where(moving, v / np.maximum(target, 1e-12), 0.0)
+    ratio = np.where(moving, v / np.maximum(target, tol.zero), 0.0)
     tcp_ratio = float(ratio.max()) if len(ratio) else 0.0
     over = ratio > 1.0 + SPEED_TOL
     if over.any():

@@ -30,6 +30,7 @@ from numpy.typing import NDArray
 from scipy.signal import lfilter
 
 from core.stages import Toolpath
+from core.tolerance import tol
 from planner.flow import PlannedSpeeds, knot_flow_scale, segment_speeds
 from planner.trajectory import Trajectory
 from sim.deposition import Morphology, extrusion_segments
@@ -62,7 +63,7 @@ class Slowdown(NamedTuple):
         ``extra_ink_mm3`` (report.json's inspect.as_planned)."""
         slowed = self.ratio < SLOWED
         return {"slowed_length_fraction":
-                float(self.length[slowed].sum() / max(float(self.length.sum()), 1e-12)),
+                float(self.length[slowed].sum() / max(float(self.length.sum()), tol.zero)),
                 "speed_ratio_min": float(self.ratio.min()) if self.ratio.size else 1.0,
                 "extra_ink_mm3": float(self.extra_mm3.sum())}
 

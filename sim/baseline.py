@@ -46,6 +46,7 @@ from scipy import ndimage
 
 from core.errors import InputError
 from core.stages import Pattern, Toolpath
+from core.tolerance import tol
 from sim.deposition import Morphology
 
 VOLUME_MATCHING_BETA = float(np.sqrt(np.pi) / 2.0)
@@ -124,7 +125,7 @@ def line_parameters(morphology: Morphology, config: PlanarConfig) -> tuple[float
 def section_segments(triangles: NDArray[np.float64], z: float) -> NDArray[np.float64]:
     """(m, 2, 2) float64, mm: xy end points where the plane z = ``z`` cuts (F, 3, 3) triangles."""
     d = triangles[:, :, 2] - z
-    d = np.where(d == 0.0, 1e-12, d)  # a vertex on the plane counts as just above it
+    d = np.where(d == 0.0, tol.zero, d)  # a vertex on the plane counts as just above it
     above = d > 0
     n_above = above.sum(axis=1)
     cut = (n_above == 1) | (n_above == 2)
@@ -225,7 +226,7 @@ def planar_toolpath(vertices: NDArray[np.float64], faces: NDArray[np.integer],
             return []
         sdf = _section_distance(inside) * g
         walls = _thin_walls(inside, x, y, width, config) if config.thin_walls else []
-        out = []
+        out: list[tuple[NDArray[np.float64], int, int]] = []
         for poly in _perimeters(sdf, x, y, width, config) + walls:
             pts = _resample(poly, config.spacing_mm)
             out.append((np.column_stack([pts, np.full(len(pts), z)]), k, Pattern.CONTOUR))

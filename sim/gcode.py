@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 
 from core.errors import InputError
 from core.stages import MAX_COORDINATE_MM, Pattern, Toolpath
+from core.tolerance import tol
 from slicer.extrusion import factory_rate
 
 MAX_GCODE_BYTES = 256 << 20  # a G-code file larger than this is refused before it is read
@@ -208,9 +209,9 @@ def _to_toolpath(rows: NDArray[np.float64], opt: GcodeOptions) -> Toolpath:
     height = heights[layer_of_move]
     height = np.where(height > 0, height, np.median(heights[heights > 0]) if np.any(heights > 0)
                       else 0.2)
-    width = vol / np.maximum(length * height, 1e-12)
+    width = vol / np.maximum(length * height, tol.zero)
     if opt.speed == "volume":
-        speed = opt.rate_mm3_s / np.maximum(width * height, 1e-12)
+        speed = opt.rate_mm3_s / np.maximum(width * height, tol.zero)
     else:
         speed = feed / 60.0
     # Waypoints: each path's first start point, then every move's end point.

@@ -15,6 +15,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from core.figure_style import integer_ticks, legend_outside, style
+from core.tolerance import tol
 from sim.deposition import Deposit
 from sim.metrics import Quality
 
@@ -194,7 +195,7 @@ def _slowdown_plot(path: Path, layer: np.ndarray, length_mm: np.ndarray, ratio: 
         slow = np.bincount(idx, weights=np.where(ratio < slowed, length_mm, 0.0),
                            minlength=layers.size)
         extra = np.bincount(idx, weights=extra_mm3, minlength=layers.size)
-        ax.bar(layers, 100 * slow / np.maximum(total, 1e-12), color="tab:orange",
+        ax.bar(layers, 100 * slow / np.maximum(total, tol.zero), color="tab:orange",
                label=f"path below {100 * slowed:.0f} % of its speed")
         twin = ax.twinx()
         twin.grid(False)

@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from scipy import ndimage
 
 from core.errors import InputError
+from core.tolerance import tol
 
 # Largest grid the inspection builds (voxels); above it memory (several float32/int32 fields)
 # and the distance transforms get too heavy for a workstation.
@@ -59,7 +60,7 @@ class VoxelGrid:
         # same model point always falls at the same place in its voxel, whatever the job box.
         lo = np.floor((np.asarray(lo, dtype=np.float64) - pad) / voxel) * voxel
         hi = np.asarray(hi, dtype=np.float64) + pad
-        shape = np.maximum(np.ceil((hi - lo) / voxel - 1e-9).astype(np.int64), 1)
+        shape = np.maximum(np.ceil((hi - lo) / voxel - tol.slack).astype(np.int64), 1)
         count = int(np.prod(shape))
         if count > max_voxels:
             suggest = voxel * (count / max_voxels) ** (1.0 / 3.0) * 1.05

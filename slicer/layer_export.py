@@ -10,6 +10,7 @@ from matplotlib import colormaps
 
 from core.artifacts import atomic_write_bytes
 from core.stages import Layers
+from core.tolerance import tol
 
 
 def export_layers_ply(layers: Layers, out_dir: Path) -> list[Path]:
@@ -24,7 +25,7 @@ def export_layers_ply(layers: Layers, out_dir: Path) -> list[Path]:
         layer = layers.layer(index)
         if len(layer.faces) == 0:
             continue
-        t = np.clip((layer.height - lo) / max(hi - lo, 1e-12), 0.0, 1.0)
+        t = np.clip((layer.height - lo) / max(hi - lo, tol.zero), 0.0, 1.0)
         colours = (np.asarray(cmap(t)) * 255).astype(np.uint8)
         mesh = trimesh.Trimesh(layer.vertices, layer.faces, vertex_colors=colours, process=False)
         path = out_dir / f"layer_{index:04d}.ply"

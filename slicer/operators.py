@@ -223,7 +223,7 @@ def build_operators(mesh: TetMesh) -> TetOperators:
     c23, c31, c12 = np.cross(e2, e3), np.cross(e3, e1), np.cross(e1, e2)
     det = np.einsum("ij,ij->i", e1, c23)
     scale = np.maximum(np.einsum("ij,ij->i", e1, e1), tol.zero) ** 1.5
-    good = det > 1e-12 * scale
+    good = det > tol.zero * scale
     inv = np.where(good, 1.0 / np.where(good, det, 1.0), 0.0)
     # Gradients of the barycentric coordinates lambda_1..3 are the rows of J^-1 (J = [e1 e2 e3]),
     # i.e. cofactor / det; lambda_0 = 1 - sum, so its gradient is minus their sum.

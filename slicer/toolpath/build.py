@@ -103,7 +103,7 @@ from slicer.toolpath.volume import (
     segment_volume,
 )
 
-PATTERN_NAMES = {Pattern.CONTOUR: "contour", Pattern.STRIPE: "stripe"}
+PATTERN_NAMES: dict[int, str] = {Pattern.CONTOUR: "contour", Pattern.STRIPE: "stripe"}
 DEFORM_SPREAD = 0.01  # relative W spread above which the layer is deformed (eqs. 13, 14)
 SERIAL_BELOW = 4  # fewer layers than this are processed in the calling process
 THIN_SHORTFALL = 0.25  # volume error beyond this after matching -> try the thin-band options
