@@ -41,10 +41,10 @@ Model (paper sections 3.1, 3.2):
 The toolpath is processed in print order in chunks (a layer, split into at most
 ``chunk_segments`` segments): a chunk's ink is rasterised at once, then its excess is spread.
 Both are compiled kernels (``sim.deposition_kernels``, numba) that visit only the voxels near
-the layer: a curved layer is a thin sheet in a large box, and box-wide array operations cost
-90% of the time before. A worker thread rasterises the next chunk while one spreads. A
-segment deposits when its two waypoints belong to the same path and both extrude; its speed
-is the mean of theirs. Volume is conserved exactly up to float32 rounding of the fill field.
+the layer: a curved layer is a thin sheet in a large box. A worker thread rasterises the next
+chunk while one spreads. A segment deposits when its two waypoints belong to the same path
+and both extrude; its speed is the mean of theirs. Volume is conserved exactly up to float32
+rounding of the fill field.
 """
 
 from __future__ import annotations

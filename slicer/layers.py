@@ -1,29 +1,21 @@
 """Curved layers: iso-values of the slicing field and marching-tetrahedra extraction.
 
 * ``layer_spacing``: slabs of the field about delta thick, each layer the iso-surface through
-  the middle of its slab, so the layers fill the part evenly and the physical mean height
-  stays at the target up to the factor delta' / delta (reported as ``mean_height_mm``).
-  Without critical regions inside the range: L = round((g_max - g_min) / delta) slabs of
-  delta' = (g_max - g_min) / L. The value of g on a critical region (paper eq. 7: constant
-  there) that lies inside the range, a cavity's floor or ceiling, or the top of one branch
-  of the part, is made a slab boundary: each interval between such values gets a whole
-  number of equal slabs. The surface is then the top (or bottom) of a whole layer; with one
-  global spacing it fell anywhere inside a slab and the layer there spread up to half a
-  layer of ink into the cavity (membrane example: 2,600 mm^3 on the cavity floor) while the
-  next slab's material had no layer.
+  the middle of its slab, so the layers fill the part evenly (mean height delta' / delta of
+  the target, reported as ``mean_height_mm``). The value of g on a critical region inside the
+  range (paper eq. 7), a cavity's floor or ceiling or the top of a branch, is made a slab
+  boundary and each interval between such values gets a whole number of equal slabs: the
+  surface is then the top or bottom of a whole layer, not somewhere inside a slab.
 * ``extract_layers``: the stage entry point: spacing, extraction, the critical-region and
   layer-height checks, in one ``LayerExtraction``.
-* ``iso_surfaces``: marching tetrahedra, one layer at a time (no loop over tets inside a
-  layer). A vertex sits on each crossed tet edge, shared by all tets around that edge (welded).
-  Faces are oriented so their normal points along increasing g (the growth direction); quads
-  are split into two triangles. Per vertex: direction = normalised area-weighted mean of the
-  gradients of the tets its faces cut, height H = (slab thickness) / |that mean gradient|
-  (mm).
-* ``match_slab_heights``: H scaled per layer so its integral over the layer equals the exact
-  volume of the layer's slab of the solid (``slicer.slabs``): the first-order H is off where
-  |grad g| changes across the slab (the membrane's top layer: +28 % at 0.70 mm, +23 % at 1.15).
-* ``layer_gap``: the measured distance from layer k's vertices to the surface of layer k + 1,
-  to check H against geometry.
+* ``iso_surfaces``: marching tetrahedra, one layer at a time, vertices welded on the crossed
+  tet edges, faces oriented along increasing g; per vertex the direction (normalised
+  area-weighted mean gradient) and the height H = slab thickness / |that gradient| (mm).
+* ``match_slab_heights``: H scaled per layer so its integral equals the exact volume of the
+  layer's slab (``slicer.slabs``), where the first-order H is off because |grad g| changes
+  across the slab.
+* ``layer_gap``: the measured distance from layer k's vertices to layer k + 1's surface, to
+  check H against geometry.
 """
 
 from __future__ import annotations

@@ -2,15 +2,10 @@
 
 Layer k is the middle of the field slab [b_k, b_k+1] (``layers.slab_bounds``); its height per
 vertex is H = (b_k+1 - b_k) / |grad g| at the layer, a first-order estimate of the slab's
-physical thickness. Where |grad g| changes across the slab it is off: on the membrane's top
-layer (sliced at 0.70 mm) g steepens towards the critical dome top, so the surface lies less
-than H / 2 above the layer at 99.9 % of its vertices, and the integral of H over the layer
-(the ink it gets) was 28 % above the slab's volume (2,848 against 2,231 mm^3; the first layer
-above the cavity 26 % below; at 1.15 mm +23 % and -20 %), the excess pushed out of the top
-in the virtual print. ``slab_height_scale`` gives
-the factor per layer that makes the integral of H equal the exact slab volume; the layers
-stage applies it (``layers.extract_layers``). Elsewhere it is 1 within 1e-4 (the socket's
-layers: p90 of |factor - 1| 8e-5).
+physical thickness, which is off where |grad g| changes across the slab (so the layer would
+get more or less ink than its slab holds). ``slab_height_scale`` gives the factor per layer
+that makes the integral of H equal the exact slab volume; the layers stage applies it
+(``layers.extract_layers``).
 """
 
 from __future__ import annotations

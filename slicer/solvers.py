@@ -1,30 +1,14 @@
 """Set-up-once solver for symmetric positive definite sparse systems.
 
-Chosen by measurement (``.venv/bin/python bench/bench_solvers.py``: pinned tet Laplacian of a
-jittered 36^3 grid, 279,936 tets / 50,652 unknowns, 3 right-hand sides, one BLAS thread; CPU
-seconds, because the 2 shared cores ran at a load average of 5-9 during the runs, which made
-wall-clock 2-5x longer than CPU time; peak RSS of the whole benchmark process)::
-
-    backend   setup CPU s   solve 3 rhs CPU s   residual   peak RSS GB
-    cholespy  13.6          0.05                1e-12      0.43
-    splu      10.4          0.34                4e-13      0.88
-    amg        0.11         0.59 (rtol 1e-9)    5e-10      0.43
-
-The direct factorizations scale badly on 3D meshes here (cholespy's CHOLMOD build has no nested
-dissection and no BLAS supernodes: 0.24 s at 9k unknowns, 2.0 s at 24k, 11.6 s at 50k), which
-alone would blow the 15 s budget of the whole field computation at 250k tets. So:
-
-* ``auto`` = ``cholespy`` below ``DIRECT_MAX_UNKNOWNS`` unknowns (exact, fast there), else
-  ``amg``: a pyamg smoothed-aggregation hierarchy built once, used as CG preconditioner, warm
-  started from the previous iterate (the slicing iteration changes the field little per step,
-  so a warm-started solve takes a handful of CG steps);
-* ``cg``: Jacobi-preconditioned CG, for matrices with a strong diagonal (the vector-field
-  system of eq. 6 with its alignment term: condition number bounded independent of mesh size);
-* ``splu``: SciPy SuperLU, the fallback when others fail.
-
-The iterative backends work on a reverse Cuthill-McKee reordering of the matrix (systems above
-``REORDER_MIN`` unknowns): fTetWild numbers tets nearly at random, and the reordering cut the
-CPU time of the whole field computation on the 408k-tet socket from 23.2 s to 20.3 s.
+The slicing iteration solves the same sparse systems many times, so each matrix is set up
+once and reused. ``auto`` picks ``cholespy`` (exact) below ``DIRECT_MAX_UNKNOWNS`` unknowns
+and ``amg`` above, where the direct factorisations of 3D meshes grow too slow: a pyamg
+smoothed-aggregation hierarchy built once, used as CG preconditioner and warm-started from
+the previous iterate. ``cg`` is Jacobi-preconditioned CG for matrices with a strong diagonal
+(eq. 6 with its alignment term); ``splu`` (SciPy SuperLU) is the fallback. The iterative
+backends work on a reverse Cuthill-McKee reordering above ``REORDER_MIN`` unknowns (fTetWild
+numbers tets nearly at random). The measurements behind these choices:
+docs/benchmarks.md, "Moved from docstrings (issue 24)".
 
 Solvers never raise: ``status`` says what happened.
 """

@@ -1,12 +1,10 @@
 """Repeatable tet meshes: fTetWild's result kept per input, so the same job slices the same.
 
-fTetWild is not deterministic: the same surface and settings give different meshes from run
-to run, even on one thread (measured: 17.8k to 18.7k tets on one model), and so different
-layers, toolpaths and sometimes a different plan verdict. Its source cannot be seeded from
-Python. What can be made repeatable is everything after it: the first mesh made for an input
-is stored, keyed by a SHA-256 of the surface's vertices and faces, the ``[mesh]`` settings,
-the grading, pytetwild's version and the source of the meshing code, and every later slice
-of the same input reads it back. A changed model, setting or mesher is a new key.
+fTetWild is not deterministic (the same surface and settings give different meshes from run
+to run, even on one thread) and cannot be seeded from Python, so the first mesh made for an
+input is stored, keyed by a SHA-256 of the surface, the ``[mesh]`` settings, the grading,
+pytetwild's version and the source of the meshing code, and every later slice of the same
+input reads it back. A changed model, setting or mesher is a new key.
 
 Where: ``$MESP_CACHE_DIR`` (``off`` disables it), else ``$XDG_CACHE_HOME/mesp/tetmesh``, else
 ``~/.cache/mesp/tetmesh``. Entries are written atomically (a temporary file renamed).

@@ -2,16 +2,11 @@
 
 ``tetrahedralize`` runs fTetWild with the ``[mesh]`` settings of the job, then orients every
 tet positively, drops unused vertices and measures the result (``TetStats``). With
-``refine`` (default "auto": 1 for models of more than ~50k tets) fTetWild meshes at twice the
-edge length and every tet is split into 8 (``slicer.refine``), the new boundary vertices
-snapped onto the input surface: the socket's 251k tets in 26 s instead of ~170 s, at the same
-mean quality and closer to the surface.
-
-fTetWild meshes the whole bounding box and keeps the tets inside the surface (by winding
-number), so its cost follows the box, not the solid. ``grading`` can hand it a sizing field
-that grows the target edge length away from the solid; on the socket this did not make it
-measurably faster (fTetWild applies a sizing field only after its first optimisation passes),
-so it is off by default and kept for experiments (``bench/bench_tetwild.py``).
+``refine`` (default "auto": 1 for models of more than ``AUTO_REFINE_ABOVE`` tets) fTetWild
+meshes at twice the edge length and every tet is split into 8 (``slicer.refine``), the new
+boundary vertices snapped onto the input surface: much faster on large models, at the same
+mean quality. ``grading`` hands fTetWild a sizing field that grows the edge length away from
+the solid (off by default: it did not make fTetWild faster; ``bench/bench_tetwild.py``).
 
 fTetWild is not deterministic (not even on one thread); ``cache`` makes a slice repeatable by
 reading back the mesh made before for the same input and settings (``slicer.tet_cache``).
