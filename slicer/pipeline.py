@@ -19,11 +19,11 @@ from core.artifacts import atomic_write_bytes
 from core.configtools import to_dict
 from core.errors import InputError
 from core.progress import Progress, StageTimer
+from core.report import update_report
 from core.stages import TetMesh
 from slicer.budget import check_budget
 from slicer.config import JobConfig
 from slicer.mesh_io import Surface
-from slicer.report import update_report
 
 if TYPE_CHECKING:
     from slicer.layers import LayerExtraction, LayerSpacing

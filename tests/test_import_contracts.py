@@ -24,6 +24,7 @@ SLICER_INPUTS = frozenset({
     "slicer.config",     # the job's settings (JobConfig, units)
     "slicer.mesh_io",    # the model's surface (Surface)
     "slicer.extrusion",  # the job's extrusion profile: C and the morphology model (design.md)
+    "slicer.profiles",   # the bundled extrusion profiles (data files)
 })
 #: named exceptions: ``mesp check``'s preflight shows the critical regions a slice would fix
 #: by running the slicer's own selection on the surface

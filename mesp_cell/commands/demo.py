@@ -174,7 +174,7 @@ VOLUME_TOLERANCE = 0.02
 def _against_toolpath(job_dir: Path, extruded: float) -> str:
     """`` (+0.6% of the toolpath's 16692)``, with a warning line where it is off by more than
     ``VOLUME_TOLERANCE``."""
-    from slicer.report import read_report
+    from core.report import read_report
 
     deposited = float(read_report(job_dir).get("toolpath", {}).get("deposited_volume_mm3", 0.0))
     if deposited <= 0:
@@ -199,7 +199,7 @@ def _inspect(job_dir: Path) -> None:
 def _summary(job_dir: Path, printing_s: float = 0.0, time_scale: float = 0.0) -> None:
     """The job's numbers; ``printing_s`` (wall s spent printing) gives the pace the twin kept
     against the ``time_scale`` asked."""
-    from slicer.report import read_report
+    from core.report import read_report
 
     report = read_report(job_dir)
     rows = []

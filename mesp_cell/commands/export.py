@@ -73,11 +73,11 @@ def _csv(job: Path, args: argparse.Namespace) -> str:
 
 
 def _urscript(job: Path, args: argparse.Namespace) -> str:
+    from core.report import read_report
     from planner.status import PlanStatus
     from planner.trajectory import Trajectory
     from sim.urscript import ExtruderIO, urscript
     from slicer.extrusion import load_job_profile
-    from slicer.report import read_report
 
     if not (job / "trajectory.npz").is_file():
         raise InputError(f"{job} has no trajectory.npz", f"run `mesp plan {job}` first")

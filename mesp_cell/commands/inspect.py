@@ -89,10 +89,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute `mesp inspect`."""
     from core.progress import StageTimer
+    from core.report import read_report, update_report
     from core.stages import Toolpath
     from mesp_cell.console import ConsoleProgress
     from sim.deposition import DepositionConfig
-    from slicer.report import read_report, update_report
 
     job = Path(args.dir)
     if not job.is_dir():
@@ -339,9 +339,9 @@ def _prusaslicer_toolpath(args: argparse.Namespace, job: Path, toolpath: Any, mo
                           vertices: np.ndarray, faces: np.ndarray
                           ) -> tuple[Any, dict[str, Any]]:
     """PrusaSlicer's print of the job's model (sim.commercial), moved onto the model."""
+    from core.report import read_report
     from sim.baseline import VOLUME_MATCHING_BETA
     from sim.commercial import PrusaConfig, slice_with_prusaslicer
-    from slicer.report import read_report
 
     cfg = PrusaConfig(layer_height_mm=_baseline_height(args, toolpath),
                       beta=args.baseline_beta or VOLUME_MATCHING_BETA)

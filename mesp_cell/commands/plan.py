@@ -59,12 +59,12 @@ def run(args: argparse.Namespace) -> int:
     """Plan the job in ``args.dir`` and print a one-line summary."""
     import numpy as np
 
+    from core.report import update_report
     from core.stages import Toolpath
     from planner.cell import load_cell
     from planner.other_cells import checked_fix, try_cells
     from planner.plan import plan
     from planner.status import PlanStatus, Refused
-    from slicer.report import update_report
 
     if args.render or args.video:
         from sim.gl import choose_gl

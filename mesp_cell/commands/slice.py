@@ -11,7 +11,7 @@ from core.errors import InputError
 from mesp_cell.console import ConsoleProgress
 from slicer.checks import critical_line, job_notes
 from slicer.config import JobConfig, load_job
-from slicer.report import SliceSummary
+from slicer.summary import SliceSummary
 
 HELP = """\
 Slice a solid model into curved layers and a width-constrained toolpath (paper section 4).

@@ -59,7 +59,7 @@ def _check_volume(report: dict[str, Any]) -> None:
     limit (``slicer.checks.VOLUME_ERROR``) is refused before planning, with the slicer's note
     (its cause and fix): the cell never prints a part it knows is out of tolerance."""
     from slicer.checks import VOLUME_ERROR, job_notes
-    from slicer.report import SliceSummary
+    from slicer.summary import SliceSummary
 
     error = SliceSummary.of(report).volume_error
     if error is None or abs(error) <= VOLUME_ERROR:
@@ -79,11 +79,11 @@ def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
     A plan that does not reach every waypoint or breaks a limit is refused with its status,
     so nothing moves.
     """
+    from core.report import update_report
     from core.stages import Toolpath
     from planner.cell import load_cell
     from planner.plan import plan
     from planner.status import PlanStatus
-    from slicer.report import update_report
 
     job_dir = Path(job_dir)
     toolpath = Toolpath.load(job_dir)

@@ -31,6 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from core.errors import InputError
+from core.report import update_report
 from mesp_cell.drivers.stream import StreamPlan, sha256_of
 from mesp_cell.jobs import JobRecord, JobStore
 from mesp_cell.messages import (
@@ -47,7 +48,6 @@ from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
 from mesp_cell.profiles import stale_reason
 from mesp_cell.step_timeouts import plan_timeout, slice_timeout
 from slicer.extrusion import ExtrusionProfile, load_job_profile
-from slicer.report import update_report
 
 log = logging.getLogger("mesp.supervisor")
 

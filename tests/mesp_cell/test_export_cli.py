@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
+from core.report import update_report
 from mesp_cell.cli import main
 from planner.cell import load_cell
 from planner.plan import plan
 from slicer.extrusion import PROFILE_FILE, load_profile
-from slicer.report import update_report
 from tests.planner import synthetic
 
 

@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 import trimesh
 
+from core.report import read_report
 from core.stages import TetMesh
 from mesp_cell.cli import main
 from sim import commercial
 from sim.baseline import VOLUME_MATCHING_BETA, PlanarConfig, planar_toolpath
 from sim.commercial import GCODE_FILE
 from sim.deposition import EllipseMorphology
-from slicer.report import read_report
 
 
 @pytest.fixture()
@@ -147,7 +147,7 @@ def test_default_voxel_coarsens_for_large_models() -> None:
 
 
 def test_flush_is_not_applied_twice(job: Path) -> None:
-    from slicer.report import update_report
+    from core.report import update_report
 
     _box_tetmesh((5.0, 5.0, 3.0)).save(job)
     update_report(job, {"toolpath": {"flush": {"moved": 3}}})  # as mesp slice would record

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
+from core.report import read_report
 from mesp_cell.cli import main
-from slicer.report import read_report
 from tests.planner import synthetic
 
 

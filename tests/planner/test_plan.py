@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from core.report import read_report
 from core.stages import Toolpath
 from mesp_cell.cli import main
 from planner import kinematics as kin
@@ -15,7 +16,6 @@ from planner.cell import CellConfig
 from planner.plan import PlanResult, plan
 from planner.refusal import bends
 from planner.trajectory import Trajectory
-from slicer.report import read_report
 from tests.planner import synthetic
 from tests.planner.synthetic import make_toolpath
 
