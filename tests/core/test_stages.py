@@ -1,5 +1,6 @@
 """Stage values: immutability, validation and the save/load round trip."""
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -124,3 +125,22 @@ def test_a_loaded_toolpath_must_be_printable(tmp_path: Path) -> None:
     np.savez(tmp_path / Toolpath.FILE, **{k: v[:0] for k, v in good.items()})
     with pytest.raises(InputError, match="no waypoint"):
         Toolpath.load(tmp_path)
+
+
+def test_the_file_schema_follows_the_one_declaration() -> None:
+    from core.stages import Pattern, Stage, column
+
+    assert TetMesh.SCHEMA == {"vertices": (2, "f", (3,)), "tets": (2, "iu", (4,))}
+    assert TetMesh.DTYPES == {"vertices": np.float64, "tets": np.int32}
+    assert Toolpath.SCHEMA["extrude"] == (1, "b", None)
+    assert Toolpath.SCHEMA["pattern"] == (1, "iu", None) and Toolpath.DTYPES["pattern"] is np.int8
+    assert list(Toolpath.DTYPES) == ["position", "normal", "layer", "path", "height", "width",
+                                     "speed", "extrude", "pattern"]
+
+    @dataclass(frozen=True, eq=False)
+    class Pair(Stage):
+        a: np.ndarray = column(np.float32, 2, 2)
+        b: np.ndarray = column(np.uint8)
+
+    assert Pair.SCHEMA == {"a": (3, "f", (2, 2)), "b": (1, "iu", None)}
+    assert [int(p) for p in Pattern] == [0, 1] and Pattern.STRIPE.label == "stripe"
