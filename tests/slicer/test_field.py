@@ -5,7 +5,8 @@ import pytest
 import scipy.sparse as sp
 
 from slicer.config import SlicingConfig
-from slicer.field import compute_field, height_stats, layer_heights, stats_of_gradient
+from slicer.field import compute_field
+from slicer.field_heights import height_stats, layer_heights, stats_of_gradient
 from slicer.operators import build_operators
 from slicer.solvers import SPDSolver
 from slicer.stages import TetMesh
