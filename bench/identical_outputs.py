@@ -2,8 +2,9 @@
 
 Compares every file the two directories hold: each array of each ``.npz`` bit for bit
 (``np.array_equal``, NaN equal to NaN, same dtype and shape), ``report.json`` value by value
-except wall-clock times (``IGNORED_KEYS``) and the job directories' own paths, and every
-other file (figures, PLY, text, TOML, HTML) byte for byte. Prints ``identical`` or one line
+except what differs from run to run (``IGNORED_KEYS``: times, memory, the tet cache's hit)
+and the job directories' own paths, HTML byte for byte but plotly's random UUIDs, and every
+other file (figures, PLY, text, TOML) byte for byte. Prints ``identical`` or one line
 per difference and exits 0 or 1.
 
     .venv/bin/python bench/identical_outputs.py BEFORE_DIR AFTER_DIR [--skip-figures]
@@ -14,6 +15,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import re
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -21,10 +23,14 @@ from typing import Any
 
 import numpy as np
 
-#: report.json keys holding wall-clock times, at any depth: they differ from run to run.
+#: report.json keys that differ from run to run whatever the code, at any depth: wall-clock
+#: times, the peak memory, and whether the tet mesh came from the cache (shared by both runs
+#: on purpose: fTetWild's meshing is not reproducible).
 IGNORED_KEYS = frozenset({"timing_s", "field_timing_s", "timings", "seconds",
-                          "ftetwild_seconds", "total_s"})
+                          "ftetwild_seconds", "total_s", "peak_memory_mb", "cached"})
 FIGURES = frozenset({".png", ".mp4"})
+#: plotly names each figure's <div> with a fresh UUID (preview.html).
+UUID = re.compile(rb"[0-9a-f]{8}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{4}-[0-9a-f]{12}")
 
 
 def npz_differences(a: Path, b: Path) -> Iterator[str]:
@@ -93,6 +99,9 @@ def differences(before: Path, after: Path, skip_figures: bool = False) -> list[s
             paths = (str(before.resolve()), str(after.resolve()))
             out += json_differences(json.loads(a.read_text()), json.loads(b.read_text()),
                                     str(rel), paths)
+        elif rel.suffix == ".html":
+            if UUID.sub(b"UUID", a.read_bytes()) != UUID.sub(b"UUID", b.read_bytes()):
+                out.append(f"{rel}: bytes differ (UUIDs aside)")
         elif a.read_bytes() != b.read_bytes():
             out.append(f"{rel}: bytes differ")
     return out

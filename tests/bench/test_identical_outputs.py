@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import uuid
 from pathlib import Path
 
 import numpy as np
@@ -19,10 +20,11 @@ def _job(root: Path) -> Path:
         {"plan": {"duration_s": 3.5, "timing_s": {"velocity": 0.1}},
          "job": {"out": str(root.resolve())}}))
     (root / "figure.png").write_bytes(b"png")
+    (root / "preview.html").write_text(f'<div id="{uuid.uuid4()}">plot</div>')
     return root
 
 
-def test_the_same_outputs_are_identical_whatever_the_times_and_paths(tmp_path: Path) -> None:
+def test_the_same_outputs_are_identical_whatever_the_times_paths_and_uuids(tmp_path: Path) -> None:
     a = _job(tmp_path / "a")
     b = _job(tmp_path / "b")
     report = json.loads((b / "report.json").read_text())
@@ -36,7 +38,7 @@ def test_a_changed_array_value_or_file_is_reported(tmp_path: Path) -> None:
     a = _job(tmp_path / "a")
     b = tmp_path / "b"
     shutil.copytree(a, b)
-    np.savez(b / "toolpath.npz", position=np.arange(6.0).reshape(2, 3) + [0, 0, 1e-12],
+    np.savez(b / "toolpath.npz", position=np.arange(6.0).reshape(2, 3) + np.array([0.0, 0.0, 1e-12]),
              speed=np.array([1.0, np.nan]))
     report = json.loads((b / "report.json").read_text())
     report["plan"]["duration_s"] = 3.6
