@@ -38,8 +38,8 @@ def test_a_changed_array_value_or_file_is_reported(tmp_path: Path) -> None:
     a = _job(tmp_path / "a")
     b = tmp_path / "b"
     shutil.copytree(a, b)
-    np.savez(b / "toolpath.npz", position=np.arange(6.0).reshape(2, 3) + np.array([0.0, 0.0, 1e-12]),
-             speed=np.array([1.0, np.nan]))
+    moved = np.arange(6.0).reshape(2, 3) + np.array([0.0, 0.0, 1e-12])
+    np.savez(b / "toolpath.npz", position=moved, speed=np.array([1.0, np.nan]))
     report = json.loads((b / "report.json").read_text())
     report["plan"]["duration_s"] = 3.6
     (b / "report.json").write_text(json.dumps(report))
