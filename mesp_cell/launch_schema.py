@@ -1,6 +1,6 @@
 """The checks of a launch file's values (``launch/*.toml``), each an ``InputError`` naming the
 key, what it must be and the fix: types, finite numbers in range, bus endpoints with a valid
-port. ``mesp_cell.launcher.load_launch`` applies them before anything starts."""
+port. ``mesp_cell.launch_file.load_launch`` applies them before anything starts."""
 
 from __future__ import annotations
 

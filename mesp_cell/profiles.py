@@ -19,6 +19,7 @@ from pathlib import Path
 
 from core.artifacts import atomic_write_bytes
 from core.errors import InputError
+from mesp_cell.launch_file import mesp_home
 from slicer.extrusion import ACTIVE, ExtrusionProfile, load_profile
 from slicer.profiles import FACTORY, bundled_names
 
@@ -27,8 +28,6 @@ NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._\-]*$")
 
 def library_dir() -> Path:
     """Where the lab's profiles are kept."""
-    from mesp_cell.launcher import mesp_home
-
     return mesp_home() / "profiles"
 
 
@@ -39,8 +38,6 @@ def active_file(cell: str) -> Path:
 
 def default_cell() -> str:
     """The cell a console command means without ``--on``: the only one running, else 'sim'."""
-    from mesp_cell.launcher import mesp_home
-
     run_dir = mesp_home() / "run"
     runs = sorted(run_dir.glob("*.json")) if run_dir.is_dir() else []
     return runs[0].stem if len(runs) == 1 else "sim"

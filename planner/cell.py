@@ -8,6 +8,7 @@ in these dataclasses; ``*_T`` helpers give homogeneous transforms in mm.
 
 from __future__ import annotations
 
+import tomllib
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -267,8 +268,6 @@ class CellConfig:
 
 def default_cell_data() -> dict:
     """The bundled default cell as parsed TOML."""
-    import tomllib
-
     text = resources.files("planner").joinpath("cells/default.toml").read_text()
     return tomllib.loads(text)
 

@@ -17,6 +17,7 @@ from typing import NamedTuple
 from core.errors import InputError
 from core.stages import Toolpath
 from planner.cell import CellConfig, load_cell
+from planner.plan import plan
 from planner.status import PlanStatus, Refused
 
 
@@ -57,8 +58,6 @@ def shown(path: Path | None) -> str:
 def try_cells(toolpath: Toolpath, used: Path | None) -> list[CellTrial]:
     """Plan ``toolpath`` in every bundled cell but ``used`` (None: the default), in order,
     stopping at the first that plans ok."""
-    from planner.plan import plan
-
     trials: list[CellTrial] = []
     used_real = None if used is None else Path(used).resolve()
     for name, path in bundled_cells():

@@ -31,6 +31,7 @@ from planner.orientation import (
     tool_rotation,
 )
 from planner.refusal import Bends, Steps, bends, cause_of, downward, waypoint_steps
+from planner.samples import waypoint_tangents
 from planner.status import CAUSES, FIXES, Cause, Refused
 
 
@@ -112,23 +113,6 @@ def fit_gel(cell: CellConfig, toolpath: Toolpath) -> CellConfig:
     if level >= tank.gel_fill_mm or level <= 0:
         return cell
     return replace(cell, tank=replace(tank, gel_fill_mm=level))
-
-
-def waypoint_tangents(position: np.ndarray, path: np.ndarray) -> np.ndarray:
-    """Unit motion direction (N, 3) at each waypoint: central differences inside a path."""
-    N = len(position)
-    t = np.zeros((N, 3))
-    if N < 2:
-        return t
-    same_next = np.zeros(N, dtype=bool)
-    same_next[:-1] = path[1:] == path[:-1]
-    same_prev = np.zeros(N, dtype=bool)
-    same_prev[1:] = path[1:] == path[:-1]
-    nxt = np.where(same_next, np.roll(np.arange(N), -1), np.arange(N))
-    prv = np.where(same_prev, np.roll(np.arange(N), 1), np.arange(N))
-    t = position[nxt] - position[prv]
-    n = np.linalg.norm(t, axis=1, keepdims=True)
-    return t / np.where(n > tol.zero, n, 1.0)
 
 
 def _tangents(toolpath: Toolpath, idx: np.ndarray) -> np.ndarray:

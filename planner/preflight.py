@@ -18,9 +18,10 @@ from typing import cast
 
 import numpy as np
 
+from core.stages import Toolpath
 from planner.cell import CellConfig
 from planner.orientation import COLLISION, OK, REASONS, Reach, tool_rotation
-from planner.placement import _fits, model_transform
+from planner.placement import _fits, fit_gel, model_transform
 from slicer.config import UNIT_SCALE_MM, JobConfig
 from slicer.critical import CriticalSelection, select_critical_regions
 from slicer.mesh_io import Surface
@@ -136,9 +137,6 @@ def _reach_points(surface: Surface) -> np.ndarray:
 def reach_check(cell: CellConfig, surface: Surface, spins: int = 12) -> tuple[int, int, str]:
     """(unreached points, points, the first one's reason): the nozzle vertical at
     ``_reach_points``, the part at the tank centre, the gel filled to cover it, any spin."""
-    from core.stages import Toolpath
-    from planner.placement import fit_gel
-
     v = surface.vertices
     lo, hi = v.min(axis=0), v.max(axis=0)
     # the gel level of the job (fit_gel reads the toolpath's box only)

@@ -1,7 +1,7 @@
 """Why a job cannot be printed, found before any pose is searched where geometry decides.
 
 Alpha is the angle between the nozzle axis and each depositing step, at both of the step's
-ends (``plan.resample``: the leaving and the arriving step of a waypoint). The nozzle may
+ends (``samples.resample``: the leaving and the arriving step of a waypoint). The nozzle may
 deviate from the printing direction only by the tilts and leans ``orientation_levels``
 offers. Where a path bends against its layer, no such axis keeps alpha within range on both
 steps, at any placement, in any cell with the same alpha range: ``bends`` finds these
@@ -27,6 +27,7 @@ from planner.orientation import (
     nozzle_axis,
     orientation_levels,
 )
+from planner.samples import resample
 from planner.status import Cause
 
 BEND_BATCH = 1 << 18  # (waypoint, axis) pairs per block of the bend test
@@ -49,9 +50,7 @@ class Steps(NamedTuple):
 
 
 def waypoint_steps(toolpath: Toolpath, cell: CellConfig) -> Steps:
-    """The steps of every waypoint as ``plan.resample`` defines them (identity placement)."""
-    from planner.plan import resample
-
+    """The steps of every waypoint as ``samples.resample`` defines them (identity placement)."""
     s = resample(toolpath, np.eye(4), cell)
     at = s.waypoint >= 0
     arrive = s.arrive[at]

@@ -1,62 +1,26 @@
 """The slicing scalar field of paper section 4.1: vector/scalar iteration with critical regions.
 
-Unknowns and discretisation:
-    * ``g`` is P1 on the tet vertices; its gradient is constant per tet (``TetOperators``).
-    * All vertices of one critical region Omega share one unknown (g constant on Omega, eq. 7);
-      its value G_Omega is free. Regions that touch share one unknown. The gauge (constants are
-      in the Laplacian's kernel) is fixed by pinning one unknown per connected component of
-      the mesh to 0 (the first critical region's, else the lowest vertex's) and finally
-      shifting g so that min g = 0.
-    * The vector field ``v`` lives on tets. Eq. 6 is discretised with *normalised* weights:
-      tet weight ``vol / mean(vol)`` and face weight ``area / mean(area)``. On a uniform mesh this
-      is the paper's plain sum over elements and faces, and the balance between w_l and w_h does
-      not depend on the mesh size or the model's units (raw vol- and area-weights would tie the
-      smoothing strength to the edge length).
-    * Tets owning a boundary face of a region are *constrained*: v = the region's growth
-      direction there (eq. 6 constraint; the mean over the tet's region faces if it owns
-      several). In a connected part without any region (no critical selector, or a stray
-      fragment left by the mesher) the bottom tets get v = +z. The rest are free.
-    * Tets without a layer height (grad g = 0 up to rounding: all four vertices on one
-      region) carry no weight in the layer-height statistics (``height_weights``).
+Unknowns: ``g`` is P1 on the tet vertices (its gradient constant per tet, ``TetOperators``);
+all vertices of one critical region share one unknown (g constant on it, eq. 7; touching
+regions share one), the gauge is fixed by pinning one unknown per connected part and
+shifting g to min 0. The vector field ``v`` lives on tets; eq. 6 uses normalised weights
+(``vol / mean(vol)``, ``area / mean(area)``) so the balance of w_l and w_h does not depend on
+the mesh size or the units. Tets owning a region's boundary face are constrained to its
+growth direction; a part without any region gets v = +z on its bottom tets.
 
-Steps (each constant matrix is set up once, see ``slicer.solvers``):
-    1. G0, the baseline "harmonic constraint" ([42]; ``INITIAL_FIELD = "scalar"``): Laplace's
-       equation with g fixed on every critical region to the region's area-weighted mean
-       height z (regions ordered by height, as the layers stack along +z); in a connected part
-       where that leaves fewer than two distinct values, the planar default completes it
-       (boundary vertices near the part's bottom and/or top get g = z; see
-       ``_harmonic_anchors``). Its layer height (report.json's height_std_initial_mm) is the
-       baseline of issue 2's criteria. G0 is very uneven wherever the part extends beyond the
-       regions (natural boundary, |grad g| -> 0: socket CV 3.4, aorta CV 3.6 at 2.7 / 3 mm),
-       so its normalised gradient is a poor alignment target there: the iteration started
-       from it wanders (socket 2.7 mm: final std 0.045 mm after 24 iterations, 0.11 mm if
-       the anchors are always added, instead of 0.0086 mm). The iteration is therefore
-       *started* from the harmonic vector field: v0 = eq. 6 without the alignment term (pure
-       smoothness, v fixed on constrained tets; parts without a region: +z on their bottom
-       tets), then the Poisson solve of eq. 8 (report.json's height_std_start_mm).
-       ``INITIAL_FIELD = "vector"`` makes that vector start G0 as well (the former baseline:
-       already CV 0.03, so the aorta's final/initial std ratio was 0.55 at 3 mm).
-    2. v = argmin eq. 6 with the alignment target n = grad g / |grad g|; the three components
-       share one matrix ``w_l M + w_h Lf`` (restricted to free tets). The solution is then
-       renormalised to unit length per tet (``NORMALISE_V``): the smoothing shortens v where
-       directions vary, and a shorter target in eq. 7 means a thicker layer there. Measured
-       effect with the default w_h = 1 is small (final std 0.0086 mm either way on the socket
-       example at 29k tets, 0.0075 vs 0.0076 mm on the aorta; 0.0117 vs 0.0119 mm on the
-       socket with w_h = 10).
-       Measured (issue 2: final std <= 0.30 x initial, CV <= 0.20), final std relative to
-       the scalar harmonic G0 / to the vector start: socket (top:45) 2.7 mm 0.003 / 0.15,
-       CV 0.009; aorta (bottom:30, five regions) 1.8 mm 0.004 / 0.42, CV 0.012, 3 mm
-       0.005 / 0.55, CV 0.018. On the aorta most of the remaining variance (75 %) is in the
-       arch, between start regions at several heights (tube ends at z 0 and 80, arch
-       underside, lumen ceiling): the layer count between them is fixed along every path,
-       so that variation is geometric and no field removes it (paper 4.1); tighter
-       convergence (1e-3) or w_h 0.1..3 moved the ratio to the vector start only to ~0.4.
-    3. g = argmin sum vol |grad g - v|^2 with the collapsed unknowns (Poisson, eq. 8);
-       O_align = that minimum. Stop when O_align changes by less than ``convergence``
-       (relative) or after ``max_iterations``.
+Steps (each constant matrix set up once, ``slicer.solvers``):
+    1. G0, the harmonic baseline ([42]): Laplace's equation with g fixed on each region to its
+       mean height (the planar default completes parts it leaves flat,
+       ``_harmonic_anchors``); its layer height is the baseline the result is measured
+       against. G0 is uneven where the part extends beyond the regions, so the iteration
+       starts from the harmonic *vector* field (eq. 6 without alignment) and its Poisson solve.
+    2. v = argmin eq. 6 aligned with grad g / |grad g| (one matrix for the three components),
+       renormalised to unit length per tet: a shortened v would mean a thicker layer.
+    3. g = argmin sum vol |grad g - v|^2 (Poisson, eq. 8); stop when O_align changes by less
+       than ``convergence`` or after ``max_iterations``.
 
-Layer height: H(e) = delta / |grad g(e)| with the iso-spacing delta chosen so that the
-volume-weighted mean of H over the tets equals the target layer height (``layer_heights``).
+The layer height each field implies, and its statistics: ``slicer.field_heights``. How the
+choices above were measured: docs/benchmarks.md (field).
 """
 
 from __future__ import annotations
@@ -76,6 +40,12 @@ from core.stages import TetMesh
 from core.tolerance import tol
 from slicer.config import SlicingConfig
 from slicer.critical import CriticalSelection, select_critical_regions
+from slicer.field_heights import (
+    HeightStats,
+    height_std,
+    layer_heights,
+    stats_of_gradient,
+)
 from slicer.operators import TetOperators, build_operators
 from slicer.solvers import SPDSolver
 
@@ -83,162 +53,10 @@ ALIGN_WEIGHT = 1.0  # w_l; config.smoothness_weight is w_h relative to it
 NORMALISE_V = True
 INITIAL_FIELD = "scalar"  # G0: "scalar" harmonic (Laplace, regions fixed) or "vector" (eq. 6)
 HARMONIC_REGULARISATION = 1e-8  # tiny mass term keeping the pure-smoothness system SPD
-# Relative residuals of the iterative solves. The iteration is a fixed point that corrects
-# itself and v is renormalised after each solve: on the socket example (207k tets) 1e-6 / 1e-5
-# gave the same final layer-height statistics (to 4 digits) as 1e-8 / 1e-7 with 40 % fewer
-# Krylov steps (CPU 8.7 s instead of 12.0 s for the whole field).
+# Relative residuals of the iterative solves: the iteration is a fixed point that corrects
+# itself and v is renormalised after each solve (docs/benchmarks.md, field).
 POISSON_RTOL = 1e-6
 VECTOR_RTOL = 1e-5
-ZERO_GRADIENT = 1e-9  # |grad g| below this times its mean: rounding of a constant (no height)
-GRADIENT_FLOOR = 1e-6  # |grad g| below this times its mean counts as this (finite heights)
-
-
-@dataclass(frozen=True)
-class HeightStats:
-    """Volume-weighted statistics of the per-tet layer height.
-
-    Attributes (all float, mm): mean, std, min, max, p5, p95.
-    """
-
-    mean: float
-    std: float
-    min: float
-    max: float
-    p5: float
-    p95: float
-
-    @property
-    def cv(self) -> float:
-        """Coefficient of variation std / mean (dimensionless)."""
-        return self.std / self.mean if self.mean > 0 else float("nan")
-
-    def as_dict(self) -> dict[str, float]:
-        """The report.json form: {"mean", "std", "min", "max", "p5", "p95"} in mm."""
-        return {k: float(getattr(self, k)) for k in ("mean", "std", "min", "max", "p5", "p95")}
-
-
-def _weighted_quantiles(x: np.ndarray, w: np.ndarray, q: np.ndarray) -> np.ndarray:
-    order = np.argsort(x)
-    cw = np.cumsum(w[order])
-    cw = (cw - 0.5 * w[order]) / cw[-1]
-    return np.interp(q, cw, x[order])
-
-
-def height_weights(gradient: np.ndarray, volume: np.ndarray) -> np.ndarray:
-    """Per-tet weight of the layer-height statistics: the volume, 0 where grad g is zero.
-
-    g is constant on a critical region, so a tet with all four vertices on one region (a flat
-    tet along a curved region, common at coarse meshes) has grad g = 0 up to rounding
-    (below ``ZERO_GRADIENT`` times the volume-weighted mean |grad g|): it lies inside
-    one layer and has no layer height. Weighting it would put a floored, ~1e5-times-too-large
-    height into the statistics (aorta at 6 mm: one such tet of 1e-5 of the volume made the std
-    160 mm). A gradient that is merely small still counts.
-
-    Args:
-        gradient: (T, 3) float64, per-tet gradient.
-        volume: (T,) float64, mm^3.
-
-    Returns:
-        (T,) float64, mm^3.
-    """
-    norm = np.linalg.norm(gradient, axis=1)
-    wsum = float(volume.sum())
-    mean_norm = float((norm * volume).sum() / wsum) if wsum > 0 else 0.0
-    return np.where(norm > ZERO_GRADIENT * mean_norm, volume, 0.0)
-
-
-def layer_heights(gradient: np.ndarray, volume: np.ndarray,
-                  layer_height: float) -> tuple[np.ndarray, float]:
-    """Per-tet physical layer height with the iso-spacing scaled to the target mean.
-
-    Args:
-        gradient: (T, 3) float64, per-tet field gradient (field units per mm).
-        volume: (T,) float64, mm^3, tet volumes (the weights, see ``height_weights``).
-        layer_height: float, mm, target weighted mean height.
-
-    Returns:
-        (H (T,) float64 mm, delta float in field units): H = delta / |grad g|, where delta is
-        chosen so that sum(w * H) / sum(w) = layer_height with w = ``height_weights``.
-        |grad g| is floored at GRADIENT_FLOOR times its weighted mean so a flat spot (and a
-        tet without layer height, which has no weight) gets a finite height.
-    """
-    norm = np.linalg.norm(gradient, axis=1)
-    w = height_weights(gradient, volume)
-    wsum = float(w.sum())
-    mean_norm = float((norm * w).sum() / wsum) if wsum > 0 else 0.0
-    if mean_norm <= tol.zero:
-        return np.full(len(norm), np.inf), float("nan")
-    norm = np.maximum(norm, GRADIENT_FLOOR * mean_norm)
-    delta = layer_height * wsum / float((w / norm).sum())
-    return delta / norm, delta
-
-
-def stats_of_gradient(gradient: np.ndarray, volume: np.ndarray,
-                      layer_height: float) -> HeightStats:
-    """Weighted layer-height statistics of a field (same target mean for any field).
-
-    Args:
-        gradient: (T, 3) float64, per-tet gradient.
-        volume: (T,) float64, mm^3 (weights: ``height_weights``, tets without height skipped).
-        layer_height: float, mm, target mean.
-
-    Returns:
-        The statistics; the mean equals ``layer_height`` by construction, so std of two
-        fields compares like with like.
-    """
-    h, _ = layer_heights(gradient, volume, layer_height)
-    w = height_weights(gradient, volume)
-    use = w > 0
-    if not np.all(np.isfinite(h)) or not use.any():
-        nan = float("nan")
-        return HeightStats(nan, nan, nan, nan, nan, nan)
-    h, w = h[use], w[use]
-    mean = float((h * w).sum() / w.sum())
-    std = float(np.sqrt((w * (h - mean) ** 2).sum() / w.sum()))
-    p5, p95 = _weighted_quantiles(h, w, np.array([0.05, 0.95]))
-    return HeightStats(mean=mean, std=std, min=float(h.min()), max=float(h.max()),
-                       p5=float(p5), p95=float(p95))
-
-
-@dataclass(frozen=True, eq=False)
-class HeightDistribution:
-    """The per-tet layer height of one field, with its statistics.
-
-    Attributes:
-        per_tet: (T,) float64, mm, H = delta / |grad g| per tet.
-        volume: (T,) float64, mm^3, the weights of every statistic: tet volumes, 0 for tets
-            without a layer height (``height_weights``).
-        delta: float, field units, the iso-spacing giving the target mean height.
-        stats: the volume-weighted statistics.
-    """
-
-    per_tet: np.ndarray
-    volume: np.ndarray
-    delta: float
-    stats: HeightStats
-
-    def summary(self) -> dict[str, float]:
-        """{"mean", "std", "min", "max", "p5", "p95"} in mm (report.json's height_mm)."""
-        return self.stats.as_dict()
-
-
-def height_stats(mesh: TetMesh | TetOperators, g: np.ndarray,
-                 layer_height: float) -> HeightDistribution:
-    """Layer-height distribution of a vertex field on a mesh, scaled to the target mean.
-
-    Use it for G0 and for the final g alike: both get the same mean, so their std compare
-    like with like (report.json's height_std_initial_mm vs height_mm.std).
-
-    Args:
-        mesh: the tet mesh (or its operators, to skip rebuilding them).
-        g: (V,) float64, the field.
-        layer_height: float, mm, target volume-weighted mean height.
-    """
-    ops = mesh if isinstance(mesh, TetOperators) else build_operators(mesh)
-    grad = ops.gradient(np.asarray(g, dtype=np.float64))
-    h, delta = layer_heights(grad, ops.volume, layer_height)
-    return HeightDistribution(per_tet=h, volume=height_weights(grad, ops.volume), delta=delta,
-                              stats=stats_of_gradient(grad, ops.volume, layer_height))
 
 
 class FieldTrace(NamedTuple):
@@ -500,14 +318,6 @@ def _normalised(vec: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     good = norm > tol.zero
     return np.where(good[:, None], vec / np.where(good, norm, 1.0)[:, None], fallback)
 
-
-def height_std(gradient: np.ndarray, volume: np.ndarray, layer_height: float) -> float:
-    """Just the volume-weighted std of ``layer_heights`` (mm), cheap enough per iteration."""
-    h, _ = layer_heights(gradient, volume, layer_height)
-    w = height_weights(gradient, volume)
-    w = w / w.sum()
-    mean = float(w @ h)
-    return float(np.sqrt(w @ (h - mean) ** 2))
 
 
 def planar_field(ops: TetOperators) -> np.ndarray:

@@ -17,7 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from core.stages import Field, Layers
-from slicer.field import FieldResult, HeightStats
+from slicer.field import FieldResult
+from slicer.field_heights import HeightStats
 from slicer.layers import iso_surfaces, match_slab_heights
 
 

@@ -31,6 +31,11 @@ SLICER_INPUTS = frozenset({
 SLICER_EXCEPTIONS = frozenset({
     ("planner.preflight", "slicer.critical"),
     ("planner.preflight", "slicer.operators"),
+    # the normal-spike repair runs at the plan's input: in the toolpath stage it would change
+    # saved toolpaths (docs/architecture.md)
+    ("planner.plan", "slicer.normals"),
+    # `mesp inspect --flush` and the volume-mode planar baseline flush the waypoints first
+    ("sim.baseline_prints", "slicer.toolpath.flush"),
 })
 
 

@@ -22,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mesp_cell.launcher import CellClient
+    from mesp_cell.cell_client import CellClient
 
     client = CellClient.for_cell(args.on)
     try:

@@ -55,7 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _client(args: argparse.Namespace):  # type: ignore[no-untyped-def]
-    from mesp_cell.launcher import CellClient
+    from mesp_cell.cell_client import CellClient
 
     return CellClient.for_cell(args.on)
 

@@ -47,7 +47,8 @@ def parse_sets(items: list[str]) -> dict[str, object]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from mesp_cell.launcher import Launch, LaunchFailed, bundled_launch, load_launch
+    from mesp_cell.launch_file import bundled_launch, load_launch
+    from mesp_cell.launcher import Launch, LaunchFailed
 
     path = Path(args.file)
     if not path.is_file() and bundled_launch(args.file).is_file():

@@ -26,8 +26,8 @@ def list_nodes(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
+    from mesp_cell.cell_client import CellClient
     from mesp_cell.introspect import node_list
-    from mesp_cell.launcher import CellClient
 
     client = CellClient.for_cell(args.on)
     try:

@@ -46,8 +46,8 @@ def list_topics(args: argparse.Namespace) -> int:
     from rich.console import Console
     from rich.table import Table
 
+    from mesp_cell.cell_client import CellClient
     from mesp_cell.introspect import topic_list
-    from mesp_cell.launcher import CellClient
 
     client = CellClient.for_cell(args.on)
     try:
@@ -66,8 +66,8 @@ def list_topics(args: argparse.Namespace) -> int:
 
 def echo_topic(args: argparse.Namespace) -> int:
     """Print messages until ``--count`` or Ctrl-C."""
+    from mesp_cell.cell_client import CellClient
     from mesp_cell.introspect import echo, resolve_key
-    from mesp_cell.launcher import CellClient
 
     client = CellClient.for_cell(args.on)
     try:
@@ -80,8 +80,8 @@ def echo_topic(args: argparse.Namespace) -> int:
 
 def hz_topic(args: argparse.Namespace) -> int:
     """Print the rate of a key once a second."""
+    from mesp_cell.cell_client import CellClient
     from mesp_cell.introspect import rate_stats, resolve_key
-    from mesp_cell.launcher import CellClient
 
     client = CellClient.for_cell(args.on)
     arrivals: list[float] = []

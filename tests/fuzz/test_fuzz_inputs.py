@@ -165,7 +165,7 @@ def _accepted_or_input_error(kind: str, call: Any) -> Any:
 
 @given(mutated_text(fixtures.LAUNCH_OK))
 def test_mutated_launch_files_are_accepted_or_refused_in_one_line(body: bytes) -> None:
-    from mesp_cell.launcher import load_launch
+    from mesp_cell.launch_file import load_launch
 
     with _fresh() as tmp:
         path = tmp / "launch.toml"

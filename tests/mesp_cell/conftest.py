@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from core.artifacts import save_npz
-from mesp_cell.launcher import Launch, bundled_launch, start_cell
+from mesp_cell.launch_file import bundled_launch
+from mesp_cell.launcher import Launch, start_cell
 from mesp_cell.web.node import console_urls
 from mesp_cell.web.token import load_token
 from planner.cell import load_cell

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from mesp_cell.launcher import CellClient, Launch
+from mesp_cell.cell_client import CellClient
+from mesp_cell.launcher import Launch
 from tests.mesp_cell import synthetic
 
 FAST_S = 30.0  # a failing job fails within this (the old wait was 3600 s)

@@ -51,7 +51,7 @@ def test_launch_submit_pause_resume_abort_and_ctrl_c(home: Path, tmp_path: Path,
     try:
         run_file = home / "run" / "sim.json"
         wait_for(lambda: run_file.is_file() and (home / "run").exists())
-        from mesp_cell.launcher import CellClient
+        from mesp_cell.cell_client import CellClient
 
         client = CellClient.for_cell("sim")
         wait_for(lambda: "supervisor" in client.bus().alive_nodes(0.5), 30.0)

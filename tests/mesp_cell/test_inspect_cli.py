@@ -134,8 +134,9 @@ def test_flush_moves_exposed_waypoints_and_flushes_the_baseline(job: Path) -> No
 
 
 def test_default_voxel_coarsens_for_large_models() -> None:
-    from mesp_cell.commands.inspect import AUTO_VOXEL_BUDGET, DEFAULT_VOXEL_MM, _auto_voxel
     from mesp_cell.console import ConsoleProgress
+    from sim.voxel_choice import AUTO_VOXEL_BUDGET, DEFAULT_VOXEL_MM
+    from sim.voxel_choice import auto_voxel as _auto_voxel
 
     quiet = ConsoleProgress(quiet=True)
     small = np.array([[0.0, 0.0, 0.0], [30.0, 30.0, 30.0]])

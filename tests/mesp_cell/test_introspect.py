@@ -57,7 +57,7 @@ def cell(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-d
          "--set", "plan_fn=tests.mesp_cell.synthetic:plan_job"],
         env={**os.environ}, stdout=subprocess.DEVNULL, stderr=err)
     try:
-        from mesp_cell.launcher import CellClient
+        from mesp_cell.cell_client import CellClient
 
         _wait(lambda: (home / "run" / "sim.json").is_file(), 60.0, "no run file")
         client = CellClient.for_cell("sim")

@@ -9,8 +9,8 @@ from pathlib import Path
 import pytest
 
 from core.errors import InputError
+from mesp_cell.cell_client import CellClient
 from mesp_cell.jobs import JobStore, check_submission
-from mesp_cell.launcher import CellClient
 from tests.mesp_cell import synthetic
 
 

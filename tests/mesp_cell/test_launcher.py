@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 from core.errors import InputError
-from mesp_cell.launcher import Launch, LaunchFailed, bundled_launch, load_launch
+from mesp_cell.launch_file import bundled_launch, load_launch
+from mesp_cell.launcher import Launch, LaunchFailed
 
 
 def test_bundled_launch_files_parse(monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
@@ -87,7 +88,7 @@ def test_a_stale_run_file_means_not_running(tmp_path: Path) -> None:
     import subprocess
     import sys
 
-    from mesp_cell.launcher import CellClient
+    from mesp_cell.cell_client import CellClient
 
     dead = subprocess.Popen([sys.executable, "-c", "pass"])
     dead.wait()
@@ -145,7 +146,8 @@ def test_processes_stop_when_the_launcher_dies(tmp_path: Path) -> None:
 
     code = (
         "import os, sys, time\n"
-        "from mesp_cell.launcher import load_launch, Launch\n"
+        "from mesp_cell.launch_file import load_launch\n"
+        "from mesp_cell.launcher import Launch\n"
         "from pathlib import Path\n"
         f"p = Path({str(tmp_path)!r}) / 'l.toml'\n"
         "p.write_text(\"[cell]\\nname = 'orphan'\\n[[process]]\\nname = 'emu'\\n"

@@ -47,7 +47,7 @@ def test_twin_print_records_the_published_states(tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     monkeypatch.setenv("MESP_HOME", str(tmp_path))
     model = synthetic.write_cube(tmp_path / "ring.stl")  # a real model: submit loads it
-    from mesp_cell.launcher import CellClient
+    from mesp_cell.cell_client import CellClient
 
     client = CellClient.for_cell("sim")  # store only until the cell runs
     err = (tmp_path / "launcher.err").open("wb")

@@ -16,9 +16,10 @@ from pathlib import Path
 import pytest
 
 from core.errors import InputError
+from mesp_cell.cell_client import CellClient
 from mesp_cell.drivers import registers as R
 from mesp_cell.drivers.extruder_modbus import ModbusExtruder
-from mesp_cell.launcher import CellClient, Launch
+from mesp_cell.launcher import Launch
 from mesp_cell.messages import FAULT_ESTOP, ExtruderState, RobotState, WaypointReached
 from tests.mesp_cell import synthetic
 

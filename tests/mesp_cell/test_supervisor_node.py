@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from core.errors import InputError
+from mesp_cell.cell_client import CellClient
 from mesp_cell.jobs import JobRecord
-from mesp_cell.launcher import CellClient, Launch
+from mesp_cell.launcher import Launch
 from mesp_cell.messages import RobotState
 from mesp_cell.nodes.supervisor_node import EtaEstimate
 from planner.cell import load_cell

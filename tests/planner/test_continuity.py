@@ -70,7 +70,8 @@ def test_a_plan_keeps_the_tip_on_the_path_and_the_joints_within_limits(
 def test_samples_failing_between_waypoints_are_named_with_their_reason(
         cell: CellConfig) -> None:
     from planner.orientation import COLLISION, OK, Orientation
-    from planner.plan import Samples, _between_status
+    from planner.plan_report import between_status as _between_status
+    from planner.samples import Samples
 
     reach = Reach(cell)
     M = 6

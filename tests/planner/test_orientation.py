@@ -18,7 +18,8 @@ from planner.orientation import (
     tool_rotation,
 )
 from planner.placement import model_transform
-from planner.plan import plan, resample
+from planner.plan import plan
+from planner.samples import resample
 from tests.planner.synthetic import make_toolpath, random_frames
 
 

@@ -12,7 +12,8 @@ from core.stages import Toolpath
 from planner.cell import CellConfig, load_cell
 from planner.orientation import alpha_of, nozzle_axis
 from planner.placement import fit_gel
-from planner.plan import plan, repair_normals
+from planner.plan import plan
+from slicer.normals import repair_normals
 from tests.planner import synthetic
 from tests.planner.synthetic import make_toolpath, random_frames
 
@@ -107,7 +108,7 @@ def test_gel_is_filled_to_the_cover_above_the_part(cell: CellConfig) -> None:
 
 
 def test_smoothing_moves_sharp_normal_turns_only_and_within_the_cap() -> None:
-    from planner.plan import smooth_normals
+    from planner.smoothing import smooth_normals
 
     tp = synthetic.lines(n_lines=1, length=20.0, step=0.5)
     n = np.tile([0.0, 0.0, 1.0], (len(tp), 1))

@@ -6,7 +6,8 @@ import scipy.sparse as sp
 
 from core.stages import TetMesh
 from slicer.config import SlicingConfig
-from slicer.field import compute_field, height_stats, layer_heights, stats_of_gradient
+from slicer.field import compute_field
+from slicer.field_heights import height_stats, layer_heights, stats_of_gradient
 from slicer.operators import build_operators
 from slicer.solvers import SPDSolver
 from tests.slicer.conftest import ring_mesh

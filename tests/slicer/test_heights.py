@@ -10,7 +10,8 @@ import pytest
 
 from core.stages import Layers
 from slicer.config import SlicingConfig
-from slicer.field import compute_field, height_stats
+from slicer.field import compute_field
+from slicer.field_heights import height_stats
 from slicer.heights import FaceHeights, face_heights, initial_layers, outside_profile
 from slicer.layers import extract_layers
 from slicer.operators import build_operators
