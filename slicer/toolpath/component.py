@@ -13,7 +13,6 @@ from slicer.config import ToolpathConfig
 from slicer.extrusion import ExtrusionProfile
 from slicer.stages import PATTERN_STRIPE, LayerMesh
 from slicer.tolerance import tol
-from slicer.toolpath.line_source import CENTRE_WIDTH_SCALE
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.linking import Joiner, Lifter, LinkedPath, link_pieces, mesh_graph
 from slicer.toolpath.mapback import (
@@ -34,6 +33,7 @@ from slicer.toolpath.resample import (
     resample_lines,
 )
 from slicer.toolpath.results import Waypoints
+from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
 TINY_LOOP = 2.0  # closed lines shorter than this x W are dropped (a blob, not a loop)
 

@@ -27,11 +27,12 @@ from slicer.stages import PATTERN_CONTOUR, PATTERN_STRIPE, LayerMesh
 from slicer.tolerance import tol
 from slicer.toolpath.component import Built, Component
 from slicer.toolpath.deform import deform_to_constant_width
-from slicer.toolpath.line_source import CENTRE_WIDTH_SCALE, LineSource
+from slicer.toolpath.line_source import LineSource
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.linking import Lifter
 from slicer.toolpath.results import ComponentResult, Waypoints
 from slicer.toolpath.surface import boundary_edges
+from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 from slicer.toolpath.volume import VolumeMatch, match_volume, required_volume
 from slicer.toolpath.width_measure import MeasuredWidth, measure_width
 
@@ -93,7 +94,8 @@ def _component_toolpath_unsafe(
 
     t0 = time.perf_counter()
     perimeter = cfg.stripe_perimeter and pattern == PATTERN_STRIPE
-    surf = LineSource.of(deformed, comp.faces, cfg.fit_bands, perimeter, cfg.boundary_distance)
+    surf = LineSource.of(deformed, comp.faces, cfg.fit_bands, perimeter, cfg.boundary_distance,
+                         cfg.stripe_field)
     surf.geometry.distance  # noqa: B018 (timed here: every line generator needs it)
     timings["distance"] = time.perf_counter() - t0
 
@@ -266,7 +268,7 @@ def _component_toolpath_unsafe(
         else:
             direct = replace(LineSource.of(comp.vertices, comp.faces,
                                            cfg.fit_bands and fallback != "no-band", perimeter,
-                                           cfg.boundary_distance),
+                                           cfg.boundary_distance, cfg.stripe_field),
                              wall_half_width=surf.wall_half_width)
             if used == PATTERN_CONTOUR:
                 direct = direct.with_band_fit_holes_filled(comp.w_mean)

@@ -415,7 +415,7 @@ def test_width_scalings_compound_within_the_limit() -> None:
     from slicer.config import ToolpathConfig
     from slicer.toolpath.component import Component
     from slicer.toolpath.layer_build import split_layers
-    from slicer.toolpath.line_source import CENTRE_WIDTH_SCALE
+    from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
     v, f = disc_mesh(8.0, 1.0)
     layer = split_layers(flat_layer(v, f, 1.0))[0]

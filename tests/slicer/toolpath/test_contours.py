@@ -110,7 +110,7 @@ def test_two_sided_contours_fit_a_whole_number_of_circles(w: float, radii: list[
 
 
 def test_two_sided_contours_branch_where_the_band_widens() -> None:
-    from slicer.toolpath.line_source import SurfaceGeometry
+    from slicer.toolpath.surface_geometry import SurfaceGeometry
     from slicer.toolpath.width_error import line_spacing
 
     v, f = eccentric_annulus()
@@ -150,8 +150,8 @@ def test_band_pitch_predicts_the_spacing_of_the_fitted_lines(eccentric: bool) ->
     # a 10 mm annulus at w = 2.3 mm: 4 circles 2.5 mm apart, 8.7 % off w everywhere and on
     # the pitch; an eccentric band (10 to 18 mm) changes its count and the blended pitch
     # follows the lines there too, never worse than w
-    from slicer.toolpath.line_source import PITCH_SMOOTHING, SurfaceGeometry
     from slicer.toolpath.mapback import interpolate
+    from slicer.toolpath.surface_geometry import PITCH_SMOOTHING, SurfaceGeometry
     from slicer.toolpath.width_error import line_spacing
 
     v, f = eccentric_annulus() if eccentric else disc(20.0, 0.6, inner=10.0, jitter=0.2)
