@@ -9,7 +9,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from slicer.toolpath.build import CENTRE_WIDTH_SCALE
+from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
 # Share of the layer vertices with H outside the profile above which the job is flagged.
 HEIGHT_OUT_OF_PROFILE = 0.01

@@ -183,12 +183,15 @@ class ToolpathConfig:
     stripe_perimeter: bool = _JOB["toolpath"]["stripe_perimeter"]
     first_layer_beta: float = _JOB["toolpath"]["first_layer_beta"]
     boundary_distance: Literal["eikonal", "heat"] = _JOB["toolpath"]["boundary_distance"]
+    stripe_field: Literal["across", "parallel"] = _JOB["toolpath"]["stripe_field"]
     measure_baselines: bool = _JOB["toolpath"]["measure_baselines"]
     relieve_bends: bool = _JOB["toolpath"]["relieve_bends"]
 
     def __post_init__(self) -> None:
         if self.boundary_distance not in ("eikonal", "heat"):
             raise ValueError("boundary_distance must be 'eikonal' or 'heat'")
+        if self.stripe_field not in ("across", "parallel"):
+            raise ValueError("stripe_field must be 'across' or 'parallel'")
         if not 1.0 <= self.join_factor <= 20.0:
             raise ValueError("join_factor must be in [1, 20] (connector length / W)")
         if not 0.02 <= self.waypoint_spacing <= 2.0:

@@ -1,5 +1,5 @@
 """Measured toolpath spacing and the width error |spacing - W| / W (design.md report keys;
-W the mean of the two neighbouring lines' widths, ``slicer.toolpath.build._measure``)."""
+W the mean of the two neighbouring lines' widths, ``width_measure.measure_width``)."""
 
 from __future__ import annotations
 

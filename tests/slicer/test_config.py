@@ -36,6 +36,7 @@ def test_job_file_overrides_defaults(tmp_path: Path) -> None:
         ("[slicing\n", "not valid TOML"),
         ("[slicing]\ncritical = ['sideways']\n", "not understood"),
         ("[toolpath]\nboundary_distance = 'exact'\n", "boundary_distance"),
+        ("[toolpath]\nstripe_field = 'radial'\n", "stripe_field"),
         ("[toolpath]\ndeformation_tolerance = 0.5\n", "deformation_tolerance"),
         ("[toolpath]\nmax_step_elevation_deg = 20\n", "max_step_elevation_deg"),  # cell's now
         ("[slicing]\ncritical = ['bottom@q<1']\n", "condition '@q<1' is not understood"),

@@ -12,7 +12,9 @@ from scipy.spatial import Delaunay, cKDTree
 from core.stages import Layers, Pattern
 from slicer.config import JobConfig
 from slicer.extrusion import load_profile
-from slicer.toolpath.build import ToolpathResult, compute_toolpath, layer_pattern
+from slicer.toolpath.build import compute_toolpath
+from slicer.toolpath.layer_build import layer_pattern
+from slicer.toolpath.results import ToolpathResult
 from tests.slicer.toolpath.pattern_meshes import (
     eccentric_annulus,
     flat_mesh,
@@ -411,11 +413,13 @@ def test_width_scalings_compound_within_the_limit() -> None:
     # a centre line 1.5 W wide (its band) whose flow fit asks 1.5x more still prints at most
     # 1.5 W(H): W = C / (H v) with v never below the profile's speed / 1.5
     from slicer.config import ToolpathConfig
-    from slicer.toolpath.build import CENTRE_WIDTH_SCALE, _Component, split_layers
+    from slicer.toolpath.component import Component
+    from slicer.toolpath.layer_build import split_layers
+    from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
     v, f = disc_mesh(8.0, 1.0)
     layer = split_layers(flat_layer(v, f, 1.0))[0]
-    comp = _Component(layer, np.arange(len(f)), Pattern.CONTOUR, ToolpathConfig(), PROFILE)
+    comp = Component(layer, np.arange(len(f)), Pattern.CONTOUR, ToolpathConfig(), PROFILE)
     nominal = PROFILE.speed_at(np.array([1.0, 1.0]))
     lo, hi = CENTRE_WIDTH_SCALE
     wide = comp.flowed_speed(nominal, hi)  # the band's width: 1.5 W
@@ -455,16 +459,18 @@ def test_band_fitting_holes_are_filled_where_the_layer_is_no_band() -> None:
     them. Contours fitted to the band (outer loop against the holes) miss part of the
     junction; the holes get eq. 9's iso-lines, so no area is left farther than 0.8
     spacings from a line, and the component still gets its volume."""
-    from slicer.toolpath.build import UNCOVERED, _Surface
+    from dataclasses import replace
+
+    from slicer.toolpath.line_source import UNCOVERED, LineSource
 
     v, f = plate_with_holes()
-    surf = _Surface(v, f)
+    surf = LineSource.of(v, f)
     w = 2.33
     assert not surf.band_fit_covers(w)
-    surf.fill_holes = True
-    gap = surf.line_gap(surf.lines(Pattern.CONTOUR, w))
+    surf = replace(surf, fill_holes=True)
+    gap = surf.geometry.line_gap(surf.lines(Pattern.CONTOUR, w))
     assert surf.face_area[gap > UNCOVERED * w].sum() < 0.02 * surf.face_area.sum()
-    annulus = _Surface(*disc_mesh(20.0, 0.6, inner=10.0))
+    annulus = LineSource.of(*disc_mesh(20.0, 0.6, inner=10.0))
     assert annulus.band_fit_covers(w)  # a band: nothing to fill
     layers = flat_layer(v, f, 0.6)
     res = compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False, workers=1)
@@ -500,13 +506,13 @@ def test_stripe_layer_walls_get_their_centre_line(monkeypatch: pytest.MonkeyPatc
     volume match then spreads the bridge's stripes apart. With the walls printed along
     their middle and stripes on the bridge only, the stripes keep their spacing (p50 47 ->
     2 %, p90 54 -> 33 %), and the wall lines lie on the walls' middle."""
-    import slicer.toolpath.build as build
+    import slicer.toolpath.strategy as strategy
 
     v, f = rings_with_bridge()
     layers = flat_layer(v, f, 0.6)
     config = JobConfig().with_overrides(toolpath={"first_pattern": "stripe"})
     res = compute_toolpath(layers, config, PROFILE, measure_baselines=False, workers=1)
-    monkeypatch.setattr(build, "WALL_SHARE", 2.0)  # never: stripes everywhere
+    monkeypatch.setattr(strategy, "WALL_SHARE", 2.0)  # never: stripes everywhere
     everywhere = compute_toolpath(layers, config, PROFILE, measure_baselines=False, workers=1)
     assert [s["fallback"] for s in res.layer_stats] == [["walls"]]
     assert [s["fallback"] for s in everywhere.layer_stats] == [[""]]

@@ -110,13 +110,13 @@ def test_two_sided_contours_fit_a_whole_number_of_circles(w: float, radii: list[
 
 
 def test_two_sided_contours_branch_where_the_band_widens() -> None:
-    from slicer.toolpath.build import _Surface
+    from slicer.toolpath.surface_geometry import SurfaceGeometry
     from slicer.toolpath.width_error import line_spacing
 
     v, f = eccentric_annulus()
     w = 2.45
     lines = contours.two_sided_contour_lines(v, f, *_sides(v, f), w,
-                                             _Surface(v, f).smoother(2.0 * w))
+                                             SurfaceGeometry(v, f).smoother(2.0 * w))
     _check_on_faces(v, f, lines)
     # the band is 10 mm wide at +x and 18 mm at -x: b / w = 4.1 and 7.3, 4 and 7 lines
     p = lines.points[:, :2]
@@ -150,13 +150,13 @@ def test_band_pitch_predicts_the_spacing_of_the_fitted_lines(eccentric: bool) ->
     # a 10 mm annulus at w = 2.3 mm: 4 circles 2.5 mm apart, 8.7 % off w everywhere and on
     # the pitch; an eccentric band (10 to 18 mm) changes its count and the blended pitch
     # follows the lines there too, never worse than w
-    from slicer.toolpath.build import PITCH_SMOOTHING, _Surface
     from slicer.toolpath.mapback import interpolate
+    from slicer.toolpath.surface_geometry import PITCH_SMOOTHING, SurfaceGeometry
     from slicer.toolpath.width_error import line_spacing
 
     v, f = eccentric_annulus() if eccentric else disc(20.0, 0.6, inner=10.0, jitter=0.2)
     w = 2.1 if eccentric else 2.3
-    smooth = _Surface(v, f).smoother(PITCH_SMOOTHING * w)
+    smooth = SurfaceGeometry(v, f).smoother(PITCH_SMOOTHING * w)
     lines = contours.two_sided_contour_lines(v, f, *_sides(v, f), w, smooth)
     pitch, _ = contours.band_pitch(*_sides(v, f), w, smooth)
     spacing = line_spacing(lines.points, lines.line, closed=lines.closed)

@@ -21,7 +21,7 @@ from slicer.field import compute_field
 from slicer.layers import extract_layers
 from slicer.mesh_io import load_surface
 from slicer.tetrahedralize import tetrahedralize
-from slicer.toolpath.build import layer_pattern, layer_toolpath
+from slicer.toolpath.layer_build import layer_pattern, layer_toolpath
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 SPIKE_DEG = 20.0  # a waypoint this far from the mean of its two neighbours is a spike ...

@@ -65,3 +65,24 @@ def test_stripe_direction_is_unit_tangent_and_radial_on_a_disc() -> None:
 def test_bad_mesh_raises_input_error() -> None:
     with pytest.raises(InputError):
         surface.check_mesh(np.zeros((3, 3)), np.array([[0, 1, 5]]))
+
+
+def test_parallel_direction_is_the_long_axis_in_each_face() -> None:
+    v, f = disc(10.0, 0.8)
+    v = dome(v, 2.0, 10.0)
+    v[:, 0] *= 1.5  # longest along x
+    d = surface.parallel_direction(v, f)
+    assert d is not None
+    normal, _ = surface.face_normals(v, f)
+    assert np.allclose(np.linalg.norm(d, axis=1), 1.0)
+    assert np.abs(np.einsum("ij,ij->i", d, normal)).max() < 1e-9  # tangent
+    assert np.median(np.abs(d[:, 0])) > 0.95
+
+
+def test_parallel_direction_refuses_a_cap_curving_round() -> None:
+    # a hemisphere: its rim faces stand parallel to any horizontal axis (the projected field
+    # would be singular there)
+    v, f = disc(10.0, 0.8)
+    r = np.linalg.norm(v[:, :2], axis=1)
+    v[:, 2] = np.sqrt(np.maximum(10.0**2 - r**2, 0.0))
+    assert surface.parallel_direction(v, f) is None

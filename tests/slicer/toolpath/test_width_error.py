@@ -114,8 +114,8 @@ def test_foot_interpolates_the_neighbours_value() -> None:
 
 
 def test_lines_of_different_width_are_measured_against_their_mean() -> None:
-    from slicer.toolpath.build import _measure
     from slicer.toolpath.lines import SurfaceLines
+    from slicer.toolpath.width_measure import measure_width
 
     # three lines 3, 5 and 7 mm wide, 4 and 6 mm apart: they tile the plane exactly, while
     # each line's nearest neighbour is 1 mm off its own width (the measure before session 13)
@@ -126,6 +126,6 @@ def test_lines_of_different_width_are_measured_against_their_mean() -> None:
                          bary=np.tile([1.0, 0.0, 0.0], (len(pts), 1)),
                          closed=np.zeros(3, bool))
     normals = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
-    measured = _measure(lines, width, normals, lambda: (np.zeros((0, 3)), np.zeros((0, 3))))
+    measured = measure_width(lines, width, normals, lambda: (np.zeros((0, 3)), np.zeros((0, 3))))
     assert np.allclose(measured.error, 0.0)
     assert np.allclose(np.sort(np.unique(np.round(measured.pointwise, 6))), [1 / 7, 0.2, 1 / 3])

@@ -1,0 +1,88 @@
+"""Coverage of sliced jobs with the stripe field across the contours and parallel.
+
+Every STEP-th layer of each job (the same layers: ``mesp slice MODEL --until layers`` is
+enough) is printed again with ``toolpath.stripe_field`` 'across' (the default) and
+'parallel', and measured as ``mesp slice`` measures it: area-weighted gap and overlap per
+pattern (``toolpath.coverage``), the width error p90 per pattern and the chosen layers'
+volume error (deposited / integral of H - 1). Usage:
+
+    .venv/bin/python bench/stripe_field.py JOBDIR ... [--step 3] [--out FILE.json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from core.stages import Layers
+from slicer.config import load_job
+from slicer.extrusion import load_profile
+from slicer.toolpath.build import assemble
+from slicer.toolpath.coverage import layer_coverage
+from slicer.toolpath.layer_build import layer_pattern, layer_toolpath, split_layers
+
+FIELDS = ("across", "parallel")
+
+
+def measure(job_dir: Path, step: int, field: str) -> dict[str, Any]:
+    """Coverage, width p90 and volume error of every ``step``-th layer with ``field``."""
+    job = load_job(job_dir / "job.toml")
+    cfg = job.with_overrides(toolpath={"stripe_field": field}).toolpath
+    profile = load_profile(job.extrusion.profile)
+    layers = Layers.load(job_dir)
+    chosen = np.isin(layers.face_layer, np.arange(0, int(layers.face_layer.max()) + 1, step))
+    sub = Layers(layers.vertices, layers.faces[chosen], layers.face_layer[chosen],
+                 layers.vertex_height, layers.vertex_direction)
+    start = time.perf_counter()
+    results = [layer_toolpath(m, layer_pattern(m.index, cfg.first_pattern), cfg, profile, False)
+               for m in split_layers(sub) if len(m.faces)]
+    toolpath, _ = assemble(results)
+    coverage = layer_coverage(sub, toolpath).summary()
+    comps = [c for r in results for c in r.components]
+    row: dict[str, Any] = {"layers": len(results)}
+    for code, name in ((0, "contour"), (1, "stripe")):
+        err = [c.width_error for c in comps if c.pattern == code]
+        flat = np.concatenate(err) if err else np.zeros(0)
+        cov = coverage[name]
+        row[name] = {"gap": cov["gap"], "overlap": cov["overlap"],
+                     "width_p90": float(np.percentile(flat, 90)) if len(flat) else None}
+    required = sum(c.required_mm3 for c in comps)
+    row["volume_error"] = sum(c.deposited_mm3 for c in comps) / required - 1.0 if required else None
+    row["seconds"] = time.perf_counter() - start
+    return row
+
+
+def _pct(x: float | None) -> str:
+    return "/" if x is None else f"{100.0 * x:.1f}"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("jobs", nargs="+", type=Path, help="sliced job directories")
+    ap.add_argument("--step", type=int, default=3, help="every STEP-th layer")
+    ap.add_argument("--out", type=Path, help="write every number as JSON")
+    args = ap.parse_args()
+    out: dict[str, Any] = {}
+    for job_dir in args.jobs:
+        for field in FIELDS:
+            row = measure(job_dir, args.step, field)
+            out[f"{job_dir.name}:{field}"] = row
+            c, s = row["contour"], row["stripe"]
+            print(f"{job_dir.name}:{field:9s} layers {row['layers']:3d}  contour "
+                  f"{_pct(c['gap'])}/{_pct(c['overlap'])}  stripe {_pct(s['gap'])}/"
+                  f"{_pct(s['overlap'])}  p90 {_pct(c['width_p90'])}/{_pct(s['width_p90'])}  "
+                  f"volume {_pct(row['volume_error'])}  ({row['seconds']:.0f} s)", flush=True)
+            if args.out:
+                args.out.write_text(json.dumps(out, indent=1))
+
+
+if __name__ == "__main__":
+    main()

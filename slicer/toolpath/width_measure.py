@@ -1,0 +1,59 @@
+"""Width error of printed lines: the spacing to the neighbouring line against the mean of
+the two lines' widths, and a lone line against the width of the band it fills."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import NamedTuple
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slicer.toolpath.lines import SurfaceLines
+from slicer.toolpath.width_error import band_width, line_neighbours
+
+LONE_LINE = 2.0  # no other line within this x W: the line fills its band alone
+
+
+class MeasuredWidth(NamedTuple):
+    """Width error at the line points with a measured spacing (dimensionless)."""
+
+    error: NDArray[np.float64]  # (k,) |spacing - target| / target, target the pair's mean W
+    pointwise: NDArray[np.float64]  # (k,) |spacing - W| / W, W at the point alone
+    lone: int  # how many of the k points are on lone lines, measured by their band
+
+
+def measure_width(lines: SurfaceLines, width_pt: NDArray[np.float64],
+                  normals_pt: NDArray[np.float64],
+                  boundary: Callable[[], tuple[NDArray[np.float64], NDArray[np.float64]]]
+                  ) -> MeasuredWidth:
+    """The width error of ``lines`` printed at ``width_pt`` ((P,) float64 mm).
+
+    Two neighbouring lines tile the layer when they lie (W_a + W_b) / 2 apart, each covering
+    half its own width on either side; that mean, of the width at the point and at its foot
+    on the neighbouring line, is the target of the spacing. Measured against the point's W
+    alone (``pointwise``, the measure before session 13), a layer whose W changes across
+    one spacing is always off: its nearest neighbour lies on the narrower side, half the
+    change away from W (the membrane's dome layers, W 2.5-7 mm: -10 % on every interior
+    ring, however well the lines follow eq. 14).
+
+    A lone line fills a band about one width wide by itself (a thin wall, a tube's shell):
+    its nearest other line lies across the part, not beside it, so its spacing is the
+    band's width there: the distances to the boundary on its two sides (Euclidean: exact
+    on flat layers, and a band that thin is nearly flat across), against its own W.
+    ``boundary`` gives the (B, 3) mm ends a, b of the original layer's boundary segments
+    (called when needed).
+    """
+    if len(lines.points) < 2:
+        return MeasuredWidth(np.zeros(0), np.zeros(0), 0)
+    near = line_neighbours(lines.points, lines.line, normals_pt, closed=lines.closed)
+    spacing = near.spacing.copy()
+    target = 0.5 * (width_pt + near.at_foot(width_pt))
+    lone = ~np.isfinite(spacing) | (spacing > LONE_LINE * width_pt)
+    if lone.any():
+        spacing[lone] = band_width(lines.points[lone], *boundary())
+        target[lone] = width_pt[lone]
+    ok = np.isfinite(spacing) & (width_pt > 0) & (target > 0)
+    return MeasuredWidth(np.abs(spacing[ok] - target[ok]) / target[ok],
+                         np.abs(spacing[ok] - width_pt[ok]) / width_pt[ok],
+                         int(np.count_nonzero(lone & ok)))
