@@ -63,7 +63,7 @@ render:                   ## install libegl1 + libosmesa6 when missing (Debian, 
 	fi
 
 lint: $(STAMP)
-	$(BIN)/ruff check slicer planner sim mesp_cell tests bench examples
+	$(BIN)/ruff check core slicer planner sim mesp_cell tests bench examples docs
 	$(BIN)/mypy
 
 bench: $(STAMP)
