@@ -46,6 +46,7 @@ from planner.orientation import (
     choose,
     unit,
 )
+from planner.path_smoothing import smooth_along_paths
 from planner.placement import (
     Placement,
     bbox,
@@ -324,8 +325,8 @@ def plan(
     reach = Reach(cell)
     with timer.stage("normals"):
         toolpath, repaired = repair_normals(toolpath)
-        toolpath, smoothed = smooth_normals(toolpath, cell.planning.smooth_waypoints,
-                                            cell.planning.smooth_max_deg)
+        toolpath, smoothed = smooth_along_paths(toolpath, cell.planning.smooth_length_mm,
+                                                cell.planning.smooth_max_deg)
     with timer.stage("placement"):
         searched = placement is None
         if placement is None:
