@@ -179,4 +179,5 @@ def test_the_fix_names_a_bundled_cell_only_where_the_job_planned() -> None:
         "tray.toml (checked: the job plans ok in the tray cell)")
     refused = trials[0]._replace(ok=False, reason="refused (wall)")
     assert checked_fix([refused], "use a wider tank") == (
-        "use a wider tank (no bundled cell plans it either; tried tray: refused (wall))")
+        "use a wider tank (not checked; no bundled cell plans it either: tried tray: refused "
+        "(wall))")
