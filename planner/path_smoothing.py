@@ -14,7 +14,8 @@ length each waypoint stands for and t = sigma^2 / (2 STEPS), taken STEPS times (
 kernel is exponential, with long tails; a few make it close to a Gaussian of width sigma), so
 a kink is spread over about +-sigma mm whatever the spacing. Paths are not coupled (a move
 between two paths does not carry the printing direction over); all paths are one tridiagonal
-system. Each result is then turned
+system. Only near waypoints where the normal turns faster than TURN_DEG_PER_MM (fading out
+over about 2 sigma): a layer curving steadily keeps its exact normals. Each result is turned
 back towards its own normal so it deviates at most ``max_deg`` from it: alpha changes by at
 most that much, and the orientation stage and the verification check alpha against the
 result as against any printing direction.
@@ -33,6 +34,9 @@ from slicer.stages import Toolpath
 
 MIN_SEGMENT_MM = 1e-3  # repeated waypoints count as this far apart (no infinite coupling)
 STEPS = 4  # implicit diffusion steps
+TURN_DEG_PER_MM = 1.5  # normals turning faster than this between waypoints are smoothed
+FADE = 0.05  # the diffused indicator of fast turns (1 mm per waypoint) below which the
+# smoothing fades out
 
 
 def smooth_along_paths(toolpath: Toolpath, sigma_mm: float, max_deg: float
@@ -66,12 +70,23 @@ def smooth_along_paths(toolpath: Toolpath, sigma_mm: float, max_deg: float
     bands[0, 1:] = -t * coupled  # upper diagonal
     bands[1] = mass + t * (np.r_[coupled, 0.0] + np.r_[0.0, coupled])
     bands[2, :-1] = -t * coupled  # lower diagonal
-    mean = n
-    for _ in range(STEPS):  # a few banded solves of all paths at once
-        mean = solve_banded((1, 1), bands, mass[:, None] * mean)
-    mean = unit(mean)
+
+    def diffuse(values: np.ndarray) -> np.ndarray:
+        for _ in range(STEPS):  # a few banded solves of all paths at once
+            values = solve_banded((1, 1), bands, mass[:, None] * values)
+        return values
+
+    mean = unit(diffuse(n))
     bad = np.linalg.norm(mean, axis=1) < 0.5  # normals that cancel out: keep the original
     mean[bad] = n[bad]
-    out = turn_towards(n, mean, np.radians(max_deg))
+    # only where the normal turns fast (a curved layer turning steadily keeps its normals:
+    # the mean along a ring would lean them towards its axis), fading in over sigma
+    turn_step = np.arccos(np.clip(np.einsum("ij,ij->i", n[1:], n[:-1]), -1.0, 1.0))
+    fast_step = same & (turn_step > np.radians(TURN_DEG_PER_MM) * length)
+    fast = np.r_[fast_step, False] | np.r_[False, fast_step]
+    # each fast waypoint counts as 1 mm of path, whatever the spacing (a kink is a point)
+    weight = np.clip(diffuse((fast / mass)[:, None])[:, 0] / FADE, 0.0, 1.0)
+    gap = np.arccos(np.clip(np.einsum("ij,ij->i", mean, n), -1.0, 1.0))
+    out = turn_towards(n, mean, np.minimum(weight * gap, np.radians(max_deg)))
     turn = np.arccos(np.clip(np.einsum("ij,ij->i", out, n), -1.0, 1.0))
     return replace(toolpath, normal=out), turn
