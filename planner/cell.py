@@ -212,7 +212,7 @@ class PlanningConfig:
     alpha_max_deg: float = _CELL["planning"]["alpha_max_deg"]
     lean_max_deg: float = _CELL["planning"]["lean_max_deg"]
     upright_max_deg: float = _CELL["planning"]["upright_max_deg"]
-    smooth_waypoints: int = _CELL["planning"]["smooth_waypoints"]
+    smooth_length_mm: float = _CELL["planning"]["smooth_length_mm"]
     smooth_max_deg: float = _CELL["planning"]["smooth_max_deg"]
     clearance_mm: float = _CELL["planning"]["clearance_mm"]
     joint_margin_deg: float = _CELL["planning"]["joint_margin_deg"]
@@ -235,8 +235,8 @@ class PlanningConfig:
             raise ValueError("lean_max_deg must lie in [0, 60]")
         if not 0 <= self.upright_max_deg <= 45:
             raise ValueError("upright_max_deg must lie in [0, 45]")
-        if self.smooth_waypoints < 0 or not 0 <= self.smooth_max_deg <= 20:
-            raise ValueError("need smooth_waypoints >= 0 and smooth_max_deg in [0, 20]")
+        if self.smooth_length_mm < 0 or not 0 <= self.smooth_max_deg <= 20:
+            raise ValueError("need smooth_length_mm >= 0 and smooth_max_deg in [0, 20]")
         if self.clearance_mm < 0 or self.joint_margin_deg < 0:
             raise ValueError("clearance_mm and joint_margin_deg must be >= 0")
         if self.singular_margin <= 0 or self.damping < 0:

@@ -80,13 +80,14 @@ def try_cells(toolpath: Toolpath, used: Path | None) -> list[CellTrial]:
 
 
 def checked_fix(trials: list[CellTrial], fallback: str) -> str:
-    """The fix to print: the cell that planned ok, else ``fallback`` and what was tried."""
+    """The fix to print: the cell that planned ok, else ``fallback`` marked as not checked
+    (re-slicing or changing the cell was not tried) and what was tried."""
     good = [t for t in trials if t.ok]
     if good:
         t = good[0]
         flag = "without --cell" if t.path is None else f"with --cell {shown(t.path)}"
         return f"plan {flag} (checked: the job plans ok in the {t.name} cell)"
     if not trials:
-        return fallback
+        return f"{fallback} (not checked)"
     tried = ", ".join(f"{t.name}: {t.reason}" for t in trials)
-    return f"{fallback} (no bundled cell plans it either; tried {tried})"
+    return f"{fallback} (not checked; no bundled cell plans it either: tried {tried})"

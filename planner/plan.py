@@ -1,7 +1,7 @@
 """Toolpath -> timed UR5e joint trajectory: the ``mesp plan`` pipeline as a library call.
 
 Stages: normals (the slicer's repair of single-waypoint spikes, ``slicer.normals``, then the
-bounded smoothing, ``planner.smoothing``), placement (search the model's place in the tank),
+bounded smoothing along each path, ``planner.path_smoothing``), placement (search the model's place in the tank),
 resample (insert samples on long segments, ``planner.samples``), upright (turn printing
 directions towards vertical where the wrist would near the base axis), orientation (spin and
 alpha per sample), continuity (insert samples where a step in joint space would swing the tip
@@ -47,7 +47,7 @@ from planner.samples import (
     resample,
     with_moves,
 )
-from planner.smoothing import smooth_normals
+from planner.path_smoothing import smooth_along_paths
 from planner.status import MESSAGES, Cause, PlanStatus
 from planner.timing import (
     Timing,
@@ -110,8 +110,8 @@ def plan(
     reach = Reach(cell)
     with timer.stage("normals"):
         toolpath, repaired = repair_normals(toolpath)
-        toolpath, smoothed = smooth_normals(toolpath, cell.planning.smooth_waypoints,
-                                            cell.planning.smooth_max_deg)
+        toolpath, smoothed = smooth_along_paths(toolpath, cell.planning.smooth_length_mm,
+                                                cell.planning.smooth_max_deg)
     with timer.stage("placement"):
         searched = placement is None
         if placement is None:

@@ -151,6 +151,32 @@ def _null_vector(J: np.ndarray, a: np.ndarray, lam2: np.ndarray) -> np.ndarray:
 MIN_DT = 1e-6  # s, shortest step of the time law
 
 
+# The joint path's curvature q'' is taken over +-this arc length, not between neighbouring
+# samples: their spacing (0.02-2 mm, with the continuity stage's inserts) turns a small kink
+# of q' into a large second difference, and the curvature cap then slows the nozzle at that
+# one sample (a speed profile jumping 4 -> 1.3 -> 2.5 -> 1.2 mm/s on a torus). The discrete
+# acceleration check of ``time_law`` still holds every step to the limit.
+CURVATURE_WINDOW_MM = 0.5
+
+
+def window_derivative(y: np.ndarray, s: np.ndarray, h: float) -> np.ndarray:
+    """d y / d s (M, k) as the difference over [s - h, s + h] (clipped to the path's ends).
+
+    Args:
+        y: (M, k) float64, values at the samples. s: (M,) float64, increasing.
+        h: float, half window in units of ``s``; 0 gives ``np.gradient``.
+    """
+    if h <= 0 or len(s) < 2:
+        return np.gradient(y, s, axis=0) if len(s) > 1 else np.zeros_like(y)
+    lo = np.maximum(s - h, s[0])
+    hi = np.minimum(s + h, s[-1])
+    span = np.maximum(hi - lo, 1e-12)
+    out = np.empty_like(y)
+    for j in range(y.shape[1]):  # a loop over the columns (six joints), not the samples
+        out[:, j] = (np.interp(hi, s, y[:, j]) - np.interp(lo, s, y[:, j])) / span
+    return out
+
+
 def _scan_limit(cap: np.ndarray, inc: np.ndarray) -> np.ndarray:
     """x_k = min(cap_k, x_{k-1} + inc_{k-1}) for all k at once (x_0 = cap_0)."""
     S = np.concatenate([[0.0], np.cumsum(inc)])
@@ -188,7 +214,7 @@ def time_law(
                   float(np.max(2.0 * np.sqrt(step / amax))), 1e-6)
         z = np.zeros((2, 6))
         return Timing(np.array([0.0, dt1]), z, np.zeros(2), target, np.zeros(2, bool), 0, "ok")
-    ddq = np.gradient(dq, s, axis=0)  # rad/mm^2
+    ddq = window_derivative(dq, s, CURVATURE_WINDOW_MM)  # rad/mm^2, see the constant
     ds = np.diff(s)
     safety = 0.98
     # velocity caps on x = sdot^2 (mm/s)^2: TCP speed and joint speed

@@ -7,6 +7,12 @@ selector's cone (design.md, ``--critical``). The slicing field is constant on ea
 * a region whose area-weighted mean outward normal has z >= 0 is an *end* surface (e.g. the
   rim of a socket): layers end there, growth = outward normal;
 * otherwise it is a *start* surface (e.g. a bottom): growth = -outward normal (into the part).
+
+Regions that touch share one value of the field (one layer lies on both). A start and an end
+surface that touch (a thin sheet whose top and bottom faces meet at a sharp edge, the rim of
+an ear) would make the layers grow out of one and end on the other at the same value: they
+fold back between the two, and their printing directions point downward. The smaller of such
+a pair is dropped before the field is built, with a note naming it (``resolve_folds``).
 """
 
 from __future__ import annotations
@@ -87,10 +93,58 @@ def _edge_connected_patches(faces: np.ndarray) -> np.ndarray:
     return labels.astype(np.int64)
 
 
+def resolve_folds(regions: Sequence[CriticalRegion], vertices: np.ndarray
+                  ) -> tuple[tuple[CriticalRegion, ...], tuple[str, ...]]:
+    """The regions without those that touch a larger region of the other kind (start vs end).
+
+    Largest first, a region is kept unless it shares a vertex with a kept region of the
+    opposite sign; each dropped one gets a note naming it (selector, area, centre) and the
+    region it touches.
+
+    Args:
+        regions: the selected regions, in their order (kept regions keep it).
+        vertices: (V, 3) float64, mm, mesh vertex positions (for the notes).
+    """
+    if len(regions) < 2 or len({r.sign for r in regions}) < 2:
+        return tuple(regions), ()
+    owner_of: dict[float, np.ndarray] = {}  # sign -> (V,) index of the kept region, -1
+    for sign in (-1.0, 1.0):
+        owner_of[sign] = np.full(len(vertices), -1, dtype=np.int64)
+    keep = np.zeros(len(regions), dtype=bool)
+    notes: list[str] = []
+    for k in sorted(range(len(regions)), key=lambda i: -regions[i].area):  # over regions
+        r = regions[k]
+        touching = owner_of[-r.sign][r.vertices]
+        touching = touching[touching >= 0]
+        if len(touching):
+            other = regions[int(touching[0])]
+            there = _where(other, vertices)
+            notes.append(
+                f"critical region of '{r.selector}' ({_where(r, vertices)}) dropped: it touches "
+                f"the larger {_kind(other)} surface of '{other.selector}' ({there}), and one "
+                "layer cannot begin on one and end on the other (the layers would fold between "
+                "them); a position condition (@z<.., @z>..) on a selector chooses otherwise")
+            continue
+        keep[k] = True
+        owner_of[r.sign][r.vertices] = k
+    return tuple(r for r, kept in zip(regions, keep, strict=True) if kept), tuple(notes)
+
+
+def _kind(region: CriticalRegion) -> str:
+    return "end" if region.sign > 0 else "start"
+
+
+def _where(region: CriticalRegion, vertices: np.ndarray) -> str:
+    centre = vertices[region.vertices].mean(axis=0)
+    return (f"{_kind(region)}, {region.area:.0f} mm^2 at ({centre[0]:.1f}, {centre[1]:.1f}, "
+            f"{centre[2]:.1f}) mm")
+
+
 def select_critical_regions(
     ops: TetOperators,
     selectors: Sequence[CriticalSelector],
     min_faces: int = MIN_REGION_FACES,
+    folds: bool = True,
 ) -> CriticalSelection:
     """Split the boundary faces within each selector's cone into edge-connected regions.
 
@@ -98,6 +152,7 @@ def select_critical_regions(
         ops: the mesh operators (boundary faces with outward normals).
         selectors: the parsed selectors.
         min_faces: patches with fewer faces are dropped (noted in ``notes``).
+        folds: drop the smaller of a touching start and end region (``resolve_folds``).
 
     Returns:
         The regions and notes. A face matched by several selectors belongs to the first.
@@ -171,4 +226,7 @@ def select_critical_regions(
             notes.append(f"critical selector '{sel.text}' kept no patch")
         found.sort(key=lambda r: -r.area)
         regions.extend(found)
+    if folds:
+        kept, fold_notes = resolve_folds(regions, ops.vertices)
+        return CriticalSelection(regions=kept, notes=(*notes, *fold_notes))
     return CriticalSelection(regions=tuple(regions), notes=tuple(notes))

@@ -9,7 +9,7 @@ import numpy as np
 from core.stages import Toolpath
 from planner.cell import CellConfig
 from planner.plan import PlanResult, plan
-from planner.timing import _scan_limit
+from planner.timing import _scan_limit, window_derivative
 
 
 def test_scan_limit_equals_the_sequential_recursion() -> None:
@@ -127,3 +127,18 @@ def test_each_step_keeps_its_joint_speed_whatever_the_rates_say() -> None:
     speed = np.abs(np.diff(q, axis=0)) / np.diff(timing.t)[:, None]
     assert np.all(speed <= vmax + 1e-9)
     assert np.diff(timing.t)[19] >= np.radians(20.0) / vmax[5]
+
+
+def test_joint_path_curvature_is_taken_over_a_window_not_between_close_samples() -> None:
+    # q' steps by 1 at a kink of the joint path between s = 5 and a sample inserted 1 um
+    # after it (as the continuity stage inserts them): neighbouring differences see a
+    # curvature of ~500 there, the +-0.5 mm window the step spread over 1 mm
+    s = np.sort(np.r_[np.arange(0.0, 10.01, 0.5), 5.001])
+    y = (s > 5.0005).astype(float)[:, None]
+    assert np.abs(np.gradient(y, s, axis=0)).max() > 100.0
+    d = window_derivative(y, s, 0.5)
+    assert np.abs(d).max() <= 1.0 + 1e-9
+    # exact on a quadratic away from the ends (a symmetric window)
+    q = (s**2)[:, None]
+    inner = (s >= 0.5) & (s <= 9.5)
+    assert np.allclose(window_derivative(q, s, 0.5)[inner, 0], 2 * s[inner], atol=0.13)
