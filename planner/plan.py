@@ -1,7 +1,8 @@
 """Toolpath -> timed UR5e joint trajectory: the ``mesp plan`` pipeline as a library call.
 
 Stages: normals (the slicer's repair of single-waypoint spikes, ``slicer.normals``, then the
-bounded smoothing along each path, ``planner.path_smoothing``), placement (search the model's place in the tank),
+bounded smoothing along each path, ``planner.path_smoothing``), placement (search the model's
+place in the tank),
 resample (insert samples on long segments, ``planner.samples``), upright (turn printing
 directions towards vertical where the wrist would near the base axis), orientation (spin and
 alpha per sample), continuity (insert samples where a step in joint space would swing the tip
@@ -29,6 +30,7 @@ from planner.cell import CellConfig
 from planner.continuity import SWING_TOL_MM, subdivide
 from planner.entry import safe_heights, safe_move
 from planner.orientation import OK, Orientation, Reach, alpha_of, choose
+from planner.path_smoothing import smooth_along_paths
 from planner.placement import Placement, bbox, choose_placement, fit_gel, model_transform
 from planner.plan_report import (
     between_status,
@@ -47,7 +49,6 @@ from planner.samples import (
     resample,
     with_moves,
 )
-from planner.path_smoothing import smooth_along_paths
 from planner.status import MESSAGES, Cause, PlanStatus
 from planner.timing import (
     Timing,

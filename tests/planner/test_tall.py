@@ -6,7 +6,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from core.stages import Toolpath
 from planner.cell import CellConfig, load_cell
