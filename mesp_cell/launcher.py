@@ -31,8 +31,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from mesp_cell.bus.secret import private_dir, write_private
 from mesp_cell.bus.session import Bus, BusConfig
 from mesp_cell.drivers.extruder_emulator import free_port
+from mesp_cell.job_import import submit_copies
 from mesp_cell.jobs import FINAL, JobRecord, JobStore, check_submission
 from mesp_cell.messages import Command, EStop, Heartbeat, JobProgress, Reply
 from slicer.configtools import read_toml
@@ -227,8 +229,8 @@ class Launch:
                                "choose a free port in [bus] hub, or write auto") from exc
         self.bus.watch_presence(self._on_presence)
         self.bus.subscribe("*", "heartbeat", Heartbeat, self._on_heartbeat)
-        self.run_file.parent.mkdir(parents=True, exist_ok=True)
-        self.run_file.write_text(json.dumps({
+        private_dir(self.run_file.parent)
+        write_private(self.run_file, json.dumps({
             "cell": self.spec.cell, "hub": self.spec.hub, "connect": list(self.spec.connect),
             "pid": os.getpid(), "logs": str(self.log_dir)}))
         try:
@@ -496,8 +498,8 @@ class CellClient:
     def submit(self, model: Path, job_file: Path | None = None,
                cell_file: Path | None = None) -> JobRecord:
         """Check the inputs (one-line InputError if bad) and queue a job for this cell."""
-        check_submission(model, job_file, cell_file)
-        return self.store.submit(model, self.cell, self.home / "jobs", job_file, cell_file)
+        check_submission(model, job_file, cell_file, self.home)
+        return submit_copies(self.store, self.cell, self.home, model, job_file, cell_file)
 
     def status(self, job_id: str) -> JobRecord:
         return self.store.get(job_id)

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from mesp_cell.bus.signing import Role
 from mesp_cell.messages import ExtruderState, JobProgress, RobotState
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from mesp_cell.web.live import LiveState
@@ -47,6 +48,8 @@ def console_urls(processes: Sequence[Any]) -> list[str]:
 
 class ConsoleNode(LifecycleNode):
     """See the module docstring."""
+
+    bus_role = Role.OPERATOR  # it passes on the operator's commands
 
     def on_configure(self) -> None:
         import uvicorn

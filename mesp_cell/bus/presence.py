@@ -1,0 +1,83 @@
+"""Which nodes are on the bus, in a way another session cannot forge.
+
+A zenoh liveliness token says a session holds a key, but any session can declare any key, so
+a token alone lets a stranger keep a dead supervisor "present". A node counts as present here
+only while its token is there AND a heartbeat signed by it (``mesp_cell.bus.signing``, name
+bound to the heartbeat's key) arrived within ``timeout_s`` of its own send time. A node whose
+process dies is gone the moment its token goes (zenoh removes it); one whose token is held by
+someone else is gone once its signed heartbeats stop for ``timeout_s``.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from mesp_cell.bus.keys import key, parse_key
+from mesp_cell.messages import Heartbeat
+
+if TYPE_CHECKING:
+    from mesp_cell.bus.session import Bus
+
+#: s without a signed heartbeat after which a node with a token counts as gone (heartbeats
+#: come every 0.5 s; a loaded host delays a thread by up to ~1 s).
+TIMEOUT_S = 3.0
+
+
+class PresenceWatch:
+    """Calls ``callback(node, alive)`` when a node becomes present or stops being present."""
+
+    def __init__(self, bus: Bus, callback: Callable[[str, bool], None],
+                 timeout_s: float = TIMEOUT_S) -> None:
+        self.bus = bus
+        self.callback = callback
+        self.timeout_s = timeout_s
+        self.tokens: set[str] = set()
+        self.beats: dict[str, float] = {}  # node -> the send time of its last signed beat
+        self.present: set[str] = set()
+        self._lock = threading.Lock()
+        z = bus._zenoh
+
+        def on_token(sample: Any) -> None:
+            try:
+                node = parse_key(str(sample.key_expr)).node
+            except ValueError:
+                return
+            with self._lock:
+                (self.tokens.add if sample.kind == z.SampleKind.PUT else self.tokens.discard)(
+                    node)
+            self._update(node)
+
+        bus.subscribe("*", "heartbeat", Heartbeat, self._on_beat)
+        bus.keep(bus._session.liveliness().declare_subscriber(
+            key(bus.config.cell, "*", "alive"), on_token, history=True))
+        threading.Thread(target=self._tick, name=f"{bus.node}-presence", daemon=True).start()
+
+    def _on_beat(self, hb: Heartbeat) -> None:
+        # the beat's own send time: a late or replayed beat cannot extend presence
+        t = min(hb.t, time.time())
+        with self._lock:
+            if t <= self.beats.get(hb.node, 0.0):
+                return
+            self.beats[hb.node] = t
+        self._update(hb.node)
+
+    def _update(self, node: str) -> None:
+        now = time.time()
+        with self._lock:
+            alive = node in self.tokens and now - self.beats.get(node, 0.0) <= self.timeout_s
+            changed = alive != (node in self.present)
+            if changed:
+                (self.present.add if alive else self.present.discard)(node)
+        if changed:
+            self.callback(node, alive)
+
+    def _tick(self) -> None:
+        while not self.bus.closed:
+            time.sleep(0.1)
+            with self._lock:
+                nodes = set(self.present) | (self.tokens & set(self.beats))
+            for node in nodes:
+                self._update(node)
