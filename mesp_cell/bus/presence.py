@@ -5,7 +5,9 @@ a token alone lets a stranger keep a dead supervisor "present". A node counts as
 only while its token is there AND a heartbeat signed by it (``mesp_cell.bus.signing``, name
 bound to the heartbeat's key) arrived within ``timeout_s`` of its own send time. A node whose
 process dies is gone the moment its token goes (zenoh removes it); one whose token is held by
-someone else is gone once its signed heartbeats stop for ``timeout_s``.
+someone else is gone once its signed heartbeats stop for ``timeout_s``, or as soon as a
+restarted process of that name beats from a new session (it is reported gone, then back): a
+motion made for the old process never goes on for the new one.
 """
 
 from __future__ import annotations
@@ -15,7 +17,9 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from mesp_cell.bus.codec import CodecError, decode
 from mesp_cell.bus.keys import key, parse_key
+from mesp_cell.bus.signing import Verifier
 from mesp_cell.messages import Heartbeat
 
 if TYPE_CHECKING:
@@ -36,6 +40,7 @@ class PresenceWatch:
         self.timeout_s = timeout_s
         self.tokens: set[str] = set()
         self.beats: dict[str, float] = {}  # node -> the send time of its last signed beat
+        self.sessions: dict[str, bytes] = {}  # node -> the session its beats come from
         self.present: set[str] = set()
         self._lock = threading.Lock()
         z = bus._zenoh
@@ -50,19 +55,40 @@ class PresenceWatch:
                     node)
             self._update(node)
 
-        bus.subscribe("*", "heartbeat", Heartbeat, self._on_beat)
+        verifier = Verifier(bus.secret)
+
+        def on_beat(sample: Any) -> None:
+            k = str(sample.key_expr)
+            opened = verifier.open(k, sample.payload.to_bytes())
+            if not bus.sender_ok(k, opened.signer, opened.why, None) or opened.signer is None:
+                return
+            try:
+                hb = decode(opened.body, Heartbeat)
+            except CodecError:
+                return
+            self._on_beat(opened.signer.name, opened.signer.session, hb.t)
+
+        bus.keep(bus._session.declare_subscriber(key(bus.config.cell, "*", "heartbeat"),
+                                                 on_beat))
         bus.keep(bus._session.liveliness().declare_subscriber(
             key(bus.config.cell, "*", "alive"), on_token, history=True))
         threading.Thread(target=self._tick, name=f"{bus.node}-presence", daemon=True).start()
 
-    def _on_beat(self, hb: Heartbeat) -> None:
+    def _on_beat(self, node: str, session: bytes, sent: float) -> None:
         # the beat's own send time: a late or replayed beat cannot extend presence
-        t = min(hb.t, time.time())
+        t = min(sent, time.time())
         with self._lock:
-            if t <= self.beats.get(hb.node, 0.0):
+            restarted = self.sessions.get(node, session) != session
+            self.sessions[node] = session
+            if restarted:
+                self.beats.pop(node, None)
+            elif t <= self.beats.get(node, 0.0):
                 return
-            self.beats[hb.node] = t
-        self._update(hb.node)
+        if restarted:
+            self._update(node)  # the old process is gone
+        with self._lock:
+            self.beats[node] = t
+        self._update(node)
 
     def _update(self, node: str) -> None:
         now = time.time()

@@ -34,8 +34,11 @@ from slicer.errors import InputError
 T = TypeVar("T")
 log = logging.getLogger("mesp.bus")
 
-#: ``subscribe(sender=ANYONE)``: accept unsigned messages too (e-stops: any stop is obeyed).
+#: ``subscribe(sender=ANYONE)``: accept unsigned messages too.
 ANYONE = "*"
+#: Shared keys whose messages anyone may send: an e-stop is obeyed whoever sends it (stopping
+#: is always safe; refusing a stop because of its sender never is).
+OPEN_NODES = frozenset({"estop"})
 #: ``Bus(secret=AUTO)``: the cell's secret from ``$MESP_HOME`` (made at first start).
 AUTO = b"auto"
 #: Decides a command: '' to accept, else the one-line reason it is refused.
@@ -173,6 +176,12 @@ class Bus:
         """Whether a message on ``key_expr`` comes from whom it must (``subscribe``)."""
         if sender == ANYONE:
             return True
+        if sender is None:
+            try:
+                if parse_key(key_expr).node in OPEN_NODES:
+                    return True
+            except ValueError:
+                pass
         if signer is None:
             self.refuse(key_expr, why)
             return False
@@ -194,8 +203,8 @@ class Bus:
         """Call ``callback(message)`` for every ``kind`` message on ``<node>/<topic>``.
 
         ``node`` may be ``*``. Only messages signed with the cell's secret by ``sender``
-        (default: the node whose key it is) are passed on; ``sender=ANYONE`` takes unsigned
-        ones too. Payloads of another type or corrupt ones are dropped (counted in
+        (default: the node whose key it is; anyone on the shared ``OPEN_NODES`` keys) are
+        passed on; ``sender=ANYONE`` takes unsigned ones too. Payloads of another type or corrupt ones are dropped (counted in
         ``dropped``) rather than crashing the zenoh callback thread; unproven ones are
         refused (``refuse``).
         """

@@ -46,10 +46,12 @@ _ROLES = tuple(Role)
 
 @dataclass(frozen=True)
 class Signer:
-    """A proven sender: its bus name and role."""
+    """A proven sender: its bus name, role and session (random per bus session, so a
+    restarted process is a new session)."""
 
     name: str
     role: Role
+    session: bytes = b""
 
 
 @dataclass(frozen=True)
@@ -130,7 +132,7 @@ class Verifier:
             return Opened(body, None, f"stale signature ({time.time() - t:+.1f} s old)")
         if not self._fresh(session, counter):
             return Opened(body, None, "replayed message")
-        return Opened(body, Signer(name, _ROLES[role_i]))
+        return Opened(body, Signer(name, _ROLES[role_i], session))
 
     def _fresh(self, session: bytes, counter: int) -> bool:
         """Whether ``counter`` of ``session`` is new (within the sliding window)."""
