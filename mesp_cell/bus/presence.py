@@ -12,6 +12,7 @@ motion made for the old process never goes on for the new one.
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from collections.abc import Callable
@@ -25,9 +26,13 @@ from mesp_cell.messages import Heartbeat
 if TYPE_CHECKING:
     from mesp_cell.bus.session import Bus
 
-#: s without a signed heartbeat after which a node with a token counts as gone (heartbeats
-#: come every 0.5 s; a loaded host delays a thread by up to ~1 s).
-TIMEOUT_S = 3.0
+log = logging.getLogger("mesp.bus")
+
+#: s without a signed heartbeat after which a node with a token counts as gone. Heartbeats come
+#: every 0.5 s, but a node deep in a library call (the slicer meshing) can hold them back for
+#: several seconds on a loaded host; a process that dies takes its token with it at once, and a
+#: restarted one is noticed at its first beat, so this only bounds a forged token.
+TIMEOUT_S = 10.0
 
 
 class PresenceWatch:
@@ -98,6 +103,10 @@ class PresenceWatch:
             if changed:
                 (self.present.add if alive else self.present.discard)(node)
         if changed:
+            if not alive and node in self.tokens:
+                log.warning("%s: %s counts as gone: its token is there but %s", self.bus.node,
+                            node, f"no signed heartbeat for {now - self.beats[node]:.1f} s"
+                            if node in self.beats else "it restarted")
             self.callback(node, alive)
 
     def _tick(self) -> None:

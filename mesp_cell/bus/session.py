@@ -28,6 +28,7 @@ from mesp_cell.bus.codec import CodecError, decode, encode
 from mesp_cell.bus.keys import check_part, key, liveliness_key, parse_key
 from mesp_cell.bus.secret import cell_secret
 from mesp_cell.bus.signing import Role, Signer, Signing, Verifier, split
+from mesp_cell.bus.tls import apply_tls, tls_folder
 from mesp_cell.messages import Command, Reply
 from slicer.errors import InputError
 
@@ -55,6 +56,8 @@ class BusConfig:
         connect: endpoints it connects to (the launcher's hub, or a router).
         mode: zenoh mode, "peer" or "client".
         multicast: multicast scouting (off by default: endpoints are explicit).
+        tls_dir: folder of the cell's TLS certificates and access control (``bus.tls``; ""
+            = ``$MESP_BUS_TLS`` if set, else plain TCP on loopback).
     """
 
     cell: str = "sim"
@@ -62,6 +65,7 @@ class BusConfig:
     connect: tuple[str, ...] = ()
     mode: str = "peer"
     multicast: bool = False
+    tls_dir: str = ""
 
     def __post_init__(self) -> None:
         check_part(self.cell, "cell name")
@@ -76,7 +80,7 @@ class BusConfig:
         """The config as JSON text (passed to child processes)."""
         return json.dumps(
             {"cell": self.cell, "listen": list(self.listen), "connect": list(self.connect),
-             "mode": self.mode, "multicast": self.multicast}
+             "mode": self.mode, "multicast": self.multicast, "tls_dir": self.tls_dir}
         )
 
     @staticmethod
@@ -86,6 +90,7 @@ class BusConfig:
         return BusConfig(
             cell=data["cell"], listen=tuple(data["listen"]), connect=tuple(data["connect"]),
             mode=data.get("mode", "peer"), multicast=bool(data.get("multicast", False)),
+            tls_dir=str(data.get("tls_dir", "")),
         )
 
 
@@ -97,6 +102,9 @@ def _zenoh_config(cfg: BusConfig) -> Any:
     zc.insert_json5("scouting/multicast/enabled", "true" if cfg.multicast else "false")
     zc.insert_json5("listen/endpoints", json.dumps(list(cfg.listen) if cfg.mode == "peer" else []))
     zc.insert_json5("connect/endpoints", json.dumps(list(cfg.connect)))
+    folder = tls_folder(cfg.tls_dir)
+    if folder is not None:
+        apply_tls(zc, folder)
     return zc
 
 
