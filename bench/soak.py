@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
+MAX_RESUMES = 5  # resumes of one interrupted job before it is aborted
 
 
 @dataclass(frozen=True)
@@ -120,6 +121,16 @@ def main(argv: list[str] | None = None) -> int:
             job = client.submit(args.model, args.job)
             client.confirm_ready(job.id, timeout=3600)
             end = client.wait(job.id, timeout=3600, idle=True)
+            resumed = 0
+            # a stop the host's load caused (a stalled servo loop): resume, as an operator would
+            while end.state == "interrupted" and resumed < MAX_RESUMES:
+                print(f"{time.monotonic() - t0:7.0f} s  {job.id}: interrupted ({end.reason}); "
+                      "resuming", flush=True)
+                client.resume(job.id)
+                resumed += 1
+                end = client.wait(job.id, timeout=3600, idle=True)
+            if end.state in ("interrupted", "paused"):
+                client.command("abort", job.id)  # frees the tank for the next job
             jobs.append((job.id, end.state, time.monotonic() - start))
             print(f"{time.monotonic() - t0:7.0f} s  {job.id}: {end.state} in "
                   f"{time.monotonic() - start:.0f} s", flush=True)

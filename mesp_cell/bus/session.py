@@ -212,9 +212,9 @@ class Bus:
 
         ``node`` may be ``*``. Only messages signed with the cell's secret by ``sender``
         (default: the node whose key it is; anyone on the shared ``OPEN_NODES`` keys) are
-        passed on; ``sender=ANYONE`` takes unsigned ones too. Payloads of another type or corrupt ones are dropped (counted in
-        ``dropped``) rather than crashing the zenoh callback thread; unproven ones are
-        refused (``refuse``).
+        passed on; ``sender=ANYONE`` takes unsigned ones too. Payloads of another type or
+        corrupt ones are dropped (counted in ``dropped``) rather than crashing the zenoh
+        callback thread; unproven ones are refused (``refuse``).
         """
         verifier = Verifier(self.secret)
 

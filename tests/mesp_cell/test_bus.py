@@ -15,7 +15,6 @@ from mesp_cell.drivers.extruder_emulator import free_port
 from mesp_cell.messages import Command, EStop, Heartbeat, Reply
 from slicer.errors import InputError
 
-
 KEY = b"k" * 32
 
 

@@ -164,6 +164,6 @@ def test_access_control_makes_a_viewer_read_only(pki: dict[str, Path],
 
 
 def test_a_missing_certificate_is_one_line(tmp_path: Path) -> None:
-    with pytest.raises(InputError, match="has no ca.pem"):
+    with pytest.raises(InputError, match=r"has no ca\.pem"):
         Bus(BusConfig(cell="t", listen=("tls/127.0.0.1:0",), tls_dir=str(tmp_path)), "x",
             Role.NODE, KEY)
