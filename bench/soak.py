@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     thread = threading.Thread(target=sampler, daemon=True)
     thread.start()
     jobs: list[tuple[str, str, float]] = []
-    first_done = float("inf")
+    ends: list[float] = []  # s since the start at which each job finished
     try:
         client = cell.client()
         while time.monotonic() - t0 < args.minutes * 60:
@@ -134,8 +134,7 @@ def main(argv: list[str] | None = None) -> int:
             jobs.append((job.id, end.state, time.monotonic() - start))
             print(f"{time.monotonic() - t0:7.0f} s  {job.id}: {end.state} in "
                   f"{time.monotonic() - start:.0f} s", flush=True)
-            if end.state == "done":
-                first_done = min(first_done, time.monotonic() - t0)
+            ends.append(time.monotonic() - t0)
         client.close()
     finally:
         stop.set()
@@ -143,21 +142,23 @@ def main(argv: list[str] | None = None) -> int:
         cell.stop()
     elapsed = time.monotonic() - t0
     done = sum(1 for _, state, _ in jobs if state == "done")
-    print(f"\nsoak: {len(jobs)} jobs in {elapsed / 60:.1f} min ({done} done), "
-          f"growth from {first_done:.0f} s on (after the first job), per hour:\n")
-    later = sum(1 for _ in jobs[1:])  # jobs after the first
-    hours = max(elapsed - first_done, 1e-9) / 3600
+    warm = 1 if len(ends) >= 3 else 0
+    since = ends[warm] if ends else float("inf")
+    later = len(ends) - warm - 1  # jobs after the warm-up
+    print(f"\nsoak: {len(jobs)} jobs in {elapsed / 60:.1f} min ({done} done), growth from "
+          f"{since:.0f} s on (after job {warm + 1}), per hour and per job:\n")
+    hours = max(elapsed - since, 1e-9) / 3600
     print("| process | RSS MiB start -> end | RSS MiB/h | MiB/job | threads/h | open files/h |")
     print("| --- | --- | --- | --- | --- | --- |")
     for name, ss in sorted(series.items()):
-        rate = per_hour(ss, "rss", first_done)
+        rate = per_hour(ss, "rss", since)
         per_job = rate * hours / later if later else float("nan")
         print(f"| {name} | {ss[0].rss:.0f} -> {ss[-1].rss:.0f} | {rate:+.1f} | {per_job:+.2f} | "
-              f"{per_hour(ss, 'threads', first_done):+.1f} | "
-              f"{per_hour(ss, 'files', first_done):+.1f} |")
+              f"{per_hour(ss, 'threads', since):+.1f} | "
+              f"{per_hour(ss, 'files', since):+.1f} |")
     if args.out is not None:
         args.out.write_text(json.dumps({
-            "minutes": elapsed / 60, "jobs": jobs, "first_done_s": first_done,
+            "minutes": elapsed / 60, "jobs": jobs, "ends_s": ends, "warm_up_s": since,
             "series": {k: [asdict(s) for s in v] for k, v in series.items()}}, indent=1))
     return 0 if jobs and done == len(jobs) else 1
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from mesp_cell.bus.secret import mesp_home, private_dir
-from mesp_cell.job_import import copy_into, importable, profile_refusal
+from mesp_cell.job_import import copy_into, importable, profile_refusal, safe_name
 from slicer.errors import InputError
 
 STATES = (
@@ -209,7 +209,7 @@ class JobStore:
         (``check_submission``).
         """
         home = self.path.parent
-        sources = [(importable(Path(model), home, "model"), "model" + Path(model).suffix.lower())]
+        sources = [(importable(Path(model), home, "model"), safe_name(Path(model).name))]
         if job_file is not None:
             sources.append((importable(Path(job_file), home, "job file"), "submitted-job.toml"))
         if cell_file is not None:

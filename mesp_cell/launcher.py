@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mesp_cell.bus.secret import private_dir, write_private
+from mesp_cell.bus.secret import cell_secret, private_dir, write_private
 from mesp_cell.bus.session import Bus, BusConfig
 from mesp_cell.drivers.extruder_emulator import free_port
 from mesp_cell.job_import import submit_copies
@@ -222,8 +222,9 @@ class Launch:
         ``stop``; a critical failure is then left in ``failed``.
         """
         self.log_dir.mkdir(parents=True, exist_ok=True)
+        secret = cell_secret(self.spec.cell, self.home)  # made here at the cell's first start
         try:
-            self.bus = Bus(self.bus_config, "launcher")
+            self.bus = Bus(self.bus_config, "launcher", secret=secret)
         except Exception as exc:  # zenoh: the port is taken, the address is not this host's
             raise LaunchFailed(f"cannot open the bus hub {self.spec.hub} ({exc})",
                                "choose a free port in [bus] hub, or write auto") from exc
@@ -479,8 +480,9 @@ class CellClient:
             if self._bus_config is None:
                 raise InputError(f"cell '{self.cell}' is not running",
                                  "start it with `mesp launch launch/sim.toml`")
+            secret = cell_secret(self.cell, self.home)  # the key of this client's home
             try:
-                self._bus = Bus(self._bus_config, f"console-{os.getpid()}")
+                self._bus = Bus(self._bus_config, f"console-{os.getpid()}", secret=secret)
             except Exception as exc:  # zenoh: the hub's address cannot be reached
                 raise InputError(f"cannot reach cell '{self.cell}' on the bus ({exc})",
                                  "check that `mesp launch` is running for this cell") from exc

@@ -29,6 +29,7 @@ from mesp_cell.bus.keys import check_part, key, liveliness_key, parse_key
 from mesp_cell.bus.secret import cell_secret
 from mesp_cell.bus.signing import Role, Signer, Signing, Verifier, split
 from mesp_cell.bus.tls import apply_tls, tls_folder
+from mesp_cell.heap import TRIM_AFTER_S, give_back
 from mesp_cell.messages import Command, Reply
 from slicer.errors import InputError
 
@@ -254,6 +255,8 @@ class Bus:
         is sent from there: zenoh's callback threads only queue the query, so a long command
         (slicing for minutes, a process pool, a nested request) never blocks the session. A
         handler exception becomes a refusal naming it, so a caller always gets one line.
+        After a command that took ``heap.TRIM_AFTER_S`` or more, the freed heap goes back to
+        the OS (``heap.give_back``).
         """
         pending: queue.Queue[Any] = queue.Queue()
         verifier = Verifier(self.secret)
@@ -266,6 +269,7 @@ class Bus:
 
         def answer(query: Any) -> None:
             cmd: Command | None = None
+            started = time.monotonic()
             try:
                 payload = query.payload
                 opened = verifier.open(k, payload.to_bytes() if payload is not None else b"")
@@ -288,6 +292,8 @@ class Bus:
                 query.reply(query.key_expr, self._sign(str(query.key_expr), encode(reply)))
             finally:
                 query.drop()  # completes the query for the caller
+            if time.monotonic() - started >= TRIM_AFTER_S:
+                give_back()  # the heap a long command grew, back to the OS (``heap``)
 
         def worker() -> None:
             while True:
