@@ -2,7 +2,8 @@
 that receives them (after the sender, ``command_policy``).
 
 * extruder ``start``/``set_rate``: a finite rate within the extruder's range
-  (``slicer/ranges.toml`` ``[profile] setpoint_mm3_s``, the one owner of that range);
+  (``slicer/ranges.toml`` ``[profile] setpoint_mm3_s``, the one owner of that range; a
+  ``set_rate`` that follows the arm's speed may go down to 0);
 * robot ``load``: the trajectory keeps the cell's clearance (``[planning] clearance_mm``) from
   the arm to the cell at every sample (the planner's collision model, gel as the job filled it);
 * robot ``stream``: the first streamed sample is where the arm is (within ``START_TOL_DEG``):
@@ -41,6 +42,8 @@ def rate_refusal(cmd: Command) -> str:
     if isinstance(raw, bool) or not isinstance(raw, (int, float)):
         return f"{cmd.verb} needs a numeric rate in mm^3/s, got {raw!r}"
     lo, hi = rate_range()
+    # following the arm's speed (flow sync) may ask for less than a set-point, never less than 0
+    lo = lo if cmd.verb == "start" else 0.0
     if not math.isfinite(raw) or not lo <= raw <= hi:
         return (f"rate {raw} mm^3/s outside [{lo:g}, {hi:g}] "
                 "(slicer/ranges.toml [profile] setpoint_mm3_s)")

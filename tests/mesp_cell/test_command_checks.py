@@ -21,10 +21,15 @@ from planner.cell import load_cell
 from planner.collision import CollisionModel
 
 
-@pytest.mark.parametrize("rate", [math.nan, math.inf, -50.0, 0.0, 1e9, "5", None, True])
+@pytest.mark.parametrize("rate", [math.nan, math.inf, -50.0, -1e-9, 1e9, "5", None, True])
 def test_bad_rates_are_refused(rate: object) -> None:
     for verb in ("start", "set_rate"):
         assert rate_refusal(Command.make(verb, rate=rate)), (verb, rate)
+
+
+def test_a_start_needs_a_set_point_and_flow_sync_may_slow_to_zero() -> None:
+    assert "outside [0.01, " in rate_refusal(Command.make("start", rate=0.0))
+    assert rate_refusal(Command.make("set_rate", rate=0.0)) == ""
 
 
 def test_rates_in_range_pass_and_the_range_comes_from_the_ranges_file() -> None:
