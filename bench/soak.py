@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 import tempfile
 import threading
@@ -27,6 +28,7 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 MAX_RESUMES = 5  # resumes of one interrupted job before it is aborted
+STUCK_S = 600.0  # s without a change of the job: the soak stops and reports
 
 
 @dataclass(frozen=True)
@@ -69,6 +71,10 @@ def per_hour(samples: list[Sample], field: str, since: float) -> float:
         return float("nan")
     t, v = np.array(pts, dtype=float).T
     return float(np.polyfit(t, v, 1)[0] * 3600.0)
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -114,13 +120,14 @@ def main(argv: list[str] | None = None) -> int:
     thread.start()
     jobs: list[tuple[str, str, float]] = []
     ends: list[float] = []  # s since the start at which each job finished
+    signal.signal(signal.SIGTERM, _interrupt)  # `kill` stops the soak with its report
+    client = cell.client()
     try:
-        client = cell.client()
         while time.monotonic() - t0 < args.minutes * 60:
             start = time.monotonic()
             job = client.submit(args.model, args.job)
-            client.confirm_ready(job.id, timeout=3600)
-            end = client.wait(job.id, timeout=3600, idle=True)
+            client.confirm_ready(job.id, timeout=STUCK_S)
+            end = client.wait(job.id, timeout=STUCK_S, idle=True)
             resumed = 0
             # a stop the host's load caused (a stalled servo loop): resume, as an operator would
             while end.state == "interrupted" and resumed < MAX_RESUMES:
@@ -128,15 +135,20 @@ def main(argv: list[str] | None = None) -> int:
                       "resuming", flush=True)
                 client.resume(job.id)
                 resumed += 1
-                end = client.wait(job.id, timeout=3600, idle=True)
+                end = client.wait(job.id, timeout=STUCK_S, idle=True)
             if end.state in ("interrupted", "paused"):
                 client.command("abort", job.id)  # frees the tank for the next job
             jobs.append((job.id, end.state, time.monotonic() - start))
+            ends.append(time.monotonic() - t0)
             print(f"{time.monotonic() - t0:7.0f} s  {job.id}: {end.state} in "
                   f"{time.monotonic() - start:.0f} s", flush=True)
-            ends.append(time.monotonic() - t0)
-        client.close()
+    except TimeoutError as exc:  # a job that stopped moving: report it and what was measured
+        print(f"{time.monotonic() - t0:7.0f} s  stuck: {exc}", flush=True)
+        jobs.append(("stuck", str(exc), 0.0))
+    except KeyboardInterrupt:
+        print(f"{time.monotonic() - t0:7.0f} s  interrupted by the user", flush=True)
     finally:
+        client.close()
         stop.set()
         thread.join()
         cell.stop()

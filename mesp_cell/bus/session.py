@@ -41,6 +41,8 @@ ANYONE = "*"
 #: Shared keys whose messages anyone may send: an e-stop is obeyed whoever sends it (stopping
 #: is always safe; refusing a stop because of its sender never is).
 OPEN_NODES = frozenset({"estop"})
+#: Periodic topics: a message dropped under congestion is superseded by the next one.
+LOSSY_TOPICS = frozenset({"state", "heartbeat", "progress"})
 #: ``Bus(secret=AUTO)``: the cell's secret from ``$MESP_HOME`` (made at first start).
 AUTO = b"auto"
 #: Decides a command: '' to accept, else the one-line reason it is refused.
@@ -145,14 +147,21 @@ class Bus:
 
     # -- publish/subscribe -----------------------------------------------------------------
     def publish(self, topic: str, message: Any, express: bool = True) -> None:
-        """Publish a message on this node's ``topic`` (a declared publisher is reused)."""
+        """Publish a message on this node's ``topic`` (a declared publisher is reused).
+
+        A periodic topic (``LOSSY_TOPICS``) may drop a message when the link is congested (the
+        next one supersedes it); any other (stream events, waypoints) waits for room instead:
+        a dropped end-of-stream event left a supervisor waiting for it for good.
+        """
         k = self.key(topic)
         with self._lock:
             pub = self._publishers.get(k)
             if pub is None:
                 z = self._zenoh
+                lossy = topic.split("/")[-1] in LOSSY_TOPICS
+                congestion = z.CongestionControl.DROP if lossy else z.CongestionControl.BLOCK
                 pub = self._session.declare_publisher(
-                    k, congestion_control=z.CongestionControl.DROP, express=express,
+                    k, congestion_control=congestion, express=express,
                     priority=z.Priority.REAL_TIME,
                 )
                 self._publishers[k] = pub
