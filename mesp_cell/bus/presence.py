@@ -79,6 +79,17 @@ class PresenceWatch:
             key(bus.config.cell, "*", "alive"), on_token, history=True))
         threading.Thread(target=self._tick, name=f"{bus.node}-presence", daemon=True).start()
 
+    def warm(self, timeout: float) -> bool:
+        """Wait until every node holding a token has been seen beating (at most ``timeout``
+        s; a watch starts knowing tokens but no beats yet). True if it got there."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            with self._lock:
+                if self.tokens <= self.present | {self.bus.node}:
+                    return True
+            time.sleep(0.02)
+        return False
+
     def _on_beat(self, node: str, session: bytes, sent: float) -> None:
         # the beat's own send time: a late or replayed beat cannot extend presence
         t = min(sent, time.time())

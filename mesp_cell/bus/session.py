@@ -139,6 +139,7 @@ class Bus:
         self._closed = False
         self.dropped = 0  # payloads of the wrong type or corrupt, dropped by subscribers
         self._workers: list[queue.Queue[Any]] = []
+        self._watches: list[Any] = []  # presence.PresenceWatch of ``watch_presence``
 
     # -- keys ------------------------------------------------------------------------------
     def key(self, topic: str, node: str | None = None) -> str:
@@ -360,7 +361,7 @@ class Bus:
         if self.secret is not None:
             from mesp_cell.bus.presence import PresenceWatch
 
-            PresenceWatch(self, callback)
+            self._watches.append(PresenceWatch(self, callback))
             return
         z = self._zenoh
 
@@ -375,6 +376,12 @@ class Bus:
             key(self.config.cell, "*", "alive"), on_sample, history=True
         )
         self._keep.append(sub)
+
+    def presence_warm(self, timeout: float = 1.5) -> None:
+        """Wait until this session's presence watches have seen every node's heartbeat (a node
+        calls it before it announces itself, so when it counts as up, so does its view)."""
+        for watch in self._watches:
+            watch.warm(timeout)
 
     def keep(self, entity: Any) -> None:
         """Keep a declared zenoh entity until the bus closes."""

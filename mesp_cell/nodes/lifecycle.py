@@ -96,6 +96,7 @@ class LifecycleNode:
         assert self.state == "inactive" and self.bus is not None
         self.on_activate()
         self.state = "active"
+        self.bus.presence_warm()  # its view of the others is up before it counts as up
         self._beat()  # presence only once the node can do its job: a signed beat, then the token
         self.bus.announce()
         self.spawn(self._heartbeat, "heartbeat")
