@@ -13,9 +13,10 @@ from pathlib import Path
 from typing import Any
 
 from core.errors import InputError
+from mesp_cell.bus.secret import cell_secret, mesp_home
 from mesp_cell.bus.session import Bus, BusConfig
+from mesp_cell.job_import import submit_copies
 from mesp_cell.jobs import FINAL, JobRecord, JobStore, check_submission
-from mesp_cell.launch_file import mesp_home
 from mesp_cell.messages import Command, EStop, JobProgress, Reply
 
 
@@ -70,8 +71,9 @@ class CellClient:
             if self._bus_config is None:
                 raise InputError(f"cell '{self.cell}' is not running",
                                  "start it with `mesp launch launch/sim.toml`")
+            secret = cell_secret(self.cell, self.home)  # the key of this client's home
             try:
-                self._bus = Bus(self._bus_config, f"console-{os.getpid()}")
+                self._bus = Bus(self._bus_config, f"console-{os.getpid()}", secret=secret)
             except Exception as exc:  # zenoh: the hub's address cannot be reached
                 raise InputError(f"cannot reach cell '{self.cell}' on the bus ({exc})",
                                  "check that `mesp launch` is running for this cell") from exc
@@ -89,8 +91,8 @@ class CellClient:
     def submit(self, model: Path, job_file: Path | None = None,
                cell_file: Path | None = None) -> JobRecord:
         """Check the inputs (one-line InputError if bad) and queue a job for this cell."""
-        check_submission(model, job_file, cell_file)
-        return self.store.submit(model, self.cell, self.home / "jobs", job_file, cell_file)
+        check_submission(model, job_file, cell_file, self.home)
+        return submit_copies(self.store, self.cell, self.home, model, job_file, cell_file)
 
     def status(self, job_id: str) -> JobRecord:
         return self.store.get(job_id)

@@ -8,11 +8,17 @@ level; ``confirm_ready``), so no job prints into the gel the last one left behin
 While printing, the supervisor writes a checkpoint (layer, waypoint, sample) of the last
 waypoint deposited with the extruder confirmed running; a resume restarts from that sample, so
 no waypoint is printed twice or skipped. Every transition is checked and recorded in ``events``.
+
+A job's files are its own: ``submit`` makes the id, copies the model, job and cell files from an
+import folder into the job's folder (``mesp_cell.job_import``) and records the copies. The store
+and its folder are private to the user running the cell (0600 files in a 0700 folder).
 """
 
 from __future__ import annotations
 
+import os
 import re
+import shutil
 import sqlite3
 import time
 from collections.abc import Iterator
@@ -22,6 +28,8 @@ from pathlib import Path
 
 from core.errors import InputError
 from core.status import JobState
+from mesp_cell.bus.secret import mesp_home, private_dir
+from mesp_cell.job_import import copy_into, importable, profile_refusal, safe_name
 
 STATES = tuple(JobState)
 FINAL = frozenset(s for s in JobState if s.final)
@@ -105,7 +113,9 @@ class JobStore:
 
     def __init__(self, path: Path) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        private_dir(self.path.parent)
+        os.close(os.open(self.path, os.O_WRONLY | os.O_CREAT, 0o600))  # SQLite's WAL and shm
+        # files take the database file's mode
         self._db = sqlite3.connect(self.path, timeout=10.0, isolation_level=None,
                                    check_same_thread=False)
         self._db.execute("PRAGMA journal_mode=WAL")
@@ -181,31 +191,52 @@ class JobStore:
         ))
 
     # -- changes ---------------------------------------------------------------------------
-    def submit(self, model: Path, cell: str, root: Path, job_file: Path | None = None,
+    @property
+    def jobs_root(self) -> Path:
+        """The folder of the job folders (beside the store)."""
+        return self.path.parent / "jobs"
+
+    def submit(self, model: Path, cell: str, job_file: Path | None = None,
                cell_file: Path | None = None) -> JobRecord:
-        """Record a new job; its directory is ``root/<id>``. Inputs are checked by the caller.
+        """Record a new job in its own folder ``<jobs_root>/<id>``.
 
         The id is made here, never taken from a caller: the model's name reduced to
-        ``[a-z0-9-]`` (at most 40 characters) and a number, so the directory stays in ``root``.
+        ``[a-z0-9-]`` (at most 40 characters) and a number. The model, job and cell files must
+        lie in an import folder (``job_import.importable``) and are copied into the job's
+        folder; the job records the copies. Their content is checked by the caller
+        (``check_submission``).
         """
+        home = self.path.parent
+        sources = [(importable(Path(model), home, "model"), safe_name(Path(model).name))]
+        if job_file is not None:
+            sources.append((importable(Path(job_file), home, "job file"), "submitted-job.toml"))
+        if cell_file is not None:
+            sources.append((importable(Path(cell_file), home, "cell file"), "submitted-cell.toml"))
         stem = re.sub(r"[^a-z0-9]+", "-", Path(model).stem.lower()).strip("-")[:40] or "job"
         now = time.time()
+        root = private_dir(self.jobs_root)
         with self._tx() as db:
             n = db.execute("SELECT COUNT(*) FROM jobs").fetchone()[0] + 1
             job_id = f"{stem}-{n:04d}"
-            while db.execute("SELECT 1 FROM jobs WHERE id = ?", (job_id,)).fetchone():
+            while db.execute("SELECT 1 FROM jobs WHERE id = ?", (job_id,)).fetchone() \
+                    or (root / job_id).exists():
                 n += 1
                 job_id = f"{stem}-{n:04d}"
-            job_dir = Path(root) / job_id
+            job_dir = root / job_id
+            job_dir.mkdir(mode=0o700)
+            try:
+                copies = {name: str(copy_into(src, job_dir / name)) for src, name in sources}
+            except OSError as exc:
+                shutil.rmtree(job_dir, ignore_errors=True)
+                raise InputError(f"cannot copy the job's files into {job_dir} ({exc})",
+                                 "check the files and the free disk space") from exc
             db.execute(
                 "INSERT INTO jobs (id, cell, state, model, job_file, cell_file, dir, created, "
                 "updated) VALUES (?, ?, 'submitted', ?, ?, ?, ?, ?, ?)",
-                (job_id, cell, str(Path(model).resolve()),
-                 str(Path(job_file).resolve()) if job_file else "",
-                 str(Path(cell_file).resolve()) if cell_file else "", str(job_dir), now, now),
+                (job_id, cell, copies[sources[0][1]], copies.get("submitted-job.toml", ""),
+                 copies.get("submitted-cell.toml", ""), str(job_dir), now, now),
             )
             db.execute("INSERT INTO events VALUES (?, ?, '', 'submitted', '')", (job_id, now))
-        job_dir.mkdir(parents=True, exist_ok=True)
         return self.get(job_id)
 
     def check_transition(self, job: JobRecord, new_state: str) -> str:
@@ -309,11 +340,12 @@ class JobStore:
 
 
 def check_submission(model: Path, job_file: Path | None = None,
-                     cell_file: Path | None = None) -> None:
+                     cell_file: Path | None = None, home: Path | None = None) -> None:
     """Refuse a job before anything is queued or moves: a one-line ``InputError`` each for a
     missing model, one the slicer cannot read (its type, or its content: the model is loaded
     and checked as ``mesp slice`` would), a symbolic link leaving its folder, a malformed job
-    file, or a malformed cell file."""
+    file, an extrusion profile outside the profile folders of ``home`` (``$MESP_HOME``), or a
+    malformed cell file."""
     from slicer.config import load_job
     from slicer.mesh_io import SURFACE_SUFFIXES, TET_SUFFIXES, load_surface, load_tet_mesh
 
@@ -333,6 +365,10 @@ def check_submission(model: Path, job_file: Path | None = None,
     if model.stat().st_size == 0:
         raise InputError(f"model {model} is empty", "export it again")
     job = load_job(Path(job_file) if job_file is not None else None)
+    why = profile_refusal(job.extrusion.profile, home if home is not None else mesp_home())
+    if why:
+        raise InputError(why, "copy the profile into $MESP_HOME/profiles (`mesp profile`) and "
+                         "name it there, or use 'active'")
     if model.suffix.lower() in TET_SUFFIXES:
         load_tet_mesh(model, job.model)
     else:

@@ -13,7 +13,6 @@ checks every value (``mesp_cell.launch_schema``) before anything starts.
 
 from __future__ import annotations
 
-import os
 import re
 import sys
 from collections.abc import Mapping
@@ -24,14 +23,10 @@ from typing import Any
 from core.configtools import read_toml
 from core.errors import InputError
 from mesp_cell import launch_schema as check
+from mesp_cell.bus.secret import mesp_home
 from mesp_cell.drivers.extruder_emulator import free_port
 
 RESTART = ("never", "on-failure", "always")
-
-
-def mesp_home() -> Path:
-    """The state directory: ``$MESP_HOME`` or ``~/.mesp`` (job store, job dirs, logs, run files)."""
-    return Path(os.environ.get("MESP_HOME") or Path.home() / ".mesp")
 
 
 def bundled_launch(name: str) -> Path:

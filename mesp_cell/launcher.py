@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from mesp_cell.bus.secret import cell_secret, private_dir, write_private
 from mesp_cell.bus.session import Bus, BusConfig
 from mesp_cell.cell_client import CellClient
 from mesp_cell.launch_file import LaunchSpec, ProcessSpec, bundled_launch, load_launch
@@ -92,15 +93,16 @@ class Launch:
         ``stop``; a critical failure is then left in ``failed``.
         """
         self.log_dir.mkdir(parents=True, exist_ok=True)
+        secret = cell_secret(self.spec.cell, self.home)  # made here at the cell's first start
         try:
-            self.bus = Bus(self.bus_config, "launcher")
+            self.bus = Bus(self.bus_config, "launcher", secret=secret)
         except Exception as exc:  # zenoh: the port is taken, the address is not this host's
             raise LaunchFailed(f"cannot open the bus hub {self.spec.hub} ({exc})",
                                "choose a free port in [bus] hub, or write auto") from exc
         self.bus.watch_presence(self._on_presence)
         self.bus.subscribe("*", "heartbeat", Heartbeat, self._on_heartbeat)
-        self.run_file.parent.mkdir(parents=True, exist_ok=True)
-        self.run_file.write_text(json.dumps({
+        private_dir(self.run_file.parent)
+        write_private(self.run_file, json.dumps({
             "cell": self.spec.cell, "hub": self.spec.hub, "connect": list(self.spec.connect),
             "pid": os.getpid(), "logs": str(self.log_dir)}))
         try:

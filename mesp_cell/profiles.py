@@ -19,7 +19,7 @@ from pathlib import Path
 
 from core.artifacts import atomic_write_bytes
 from core.errors import InputError
-from mesp_cell.launch_file import mesp_home
+from mesp_cell.bus.secret import mesp_home
 from slicer.extrusion import ACTIVE, ExtrusionProfile, load_profile
 from slicer.profiles import FACTORY, bundled_names
 

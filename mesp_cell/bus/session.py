@@ -4,6 +4,13 @@ Peer mode on loopback by default with multicast scouting off: every endpoint is 
 (``listen``/``connect``), so the same processes run across hosts by pointing ``connect`` at a
 zenoh router or at another host's peer. Peers that connect to one common endpoint find each
 other through gossip and form a mesh, so messages between two nodes take one hop.
+
+Every payload a session sends is signed with the cell's secret (``signing``, ``secret``), and
+what it receives is checked: a subscription takes only messages proven to come from the node
+whose key they are on, a command server passes the proven sender to its ``authorize`` check,
+a request takes only a reply signed by the node asked, and presence needs the node's signed
+heartbeats as well as its liveliness token (``presence``). Anything refused is dropped, counted
+in ``refused`` and logged (at most once per key and reason every 10 s).
 """
 
 from __future__ import annotations
@@ -12,6 +19,7 @@ import json
 import logging
 import queue
 import threading
+import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TypeVar
@@ -19,10 +27,26 @@ from typing import Any, TypeVar
 from core.errors import InputError
 from mesp_cell.bus.codec import CodecError, decode, encode
 from mesp_cell.bus.keys import check_part, key, liveliness_key, parse_key
+from mesp_cell.bus.secret import cell_secret
+from mesp_cell.bus.signing import Role, Signer, Signing, Verifier, split
+from mesp_cell.bus.tls import apply_tls, tls_folder
+from mesp_cell.heap import TRIM_AFTER_S, give_back
 from mesp_cell.messages import Command, Reply
 
 T = TypeVar("T")
 log = logging.getLogger("mesp.bus")
+
+#: ``subscribe(sender=ANYONE)``: accept unsigned messages too.
+ANYONE = "*"
+#: Shared keys whose messages anyone may send: an e-stop is obeyed whoever sends it (stopping
+#: is always safe; refusing a stop because of its sender never is).
+OPEN_NODES = frozenset({"estop"})
+#: Periodic topics: a message dropped under congestion is superseded by the next one.
+LOSSY_TOPICS = frozenset({"state", "heartbeat", "progress"})
+#: ``Bus(secret=AUTO)``: the cell's secret from ``$MESP_HOME`` (made at first start).
+AUTO = b"auto"
+#: Decides a command: '' to accept, else the one-line reason it is refused.
+Authorize = Callable[[Command, "Signer | None"], str]
 
 
 @dataclass(frozen=True)
@@ -35,6 +59,8 @@ class BusConfig:
         connect: endpoints it connects to (the launcher's hub, or a router).
         mode: zenoh mode, "peer" or "client".
         multicast: multicast scouting (off by default: endpoints are explicit).
+        tls_dir: folder of the cell's TLS certificates and access control (``bus.tls``; ""
+            = ``$MESP_BUS_TLS`` if set, else plain TCP on loopback).
     """
 
     cell: str = "sim"
@@ -42,6 +68,7 @@ class BusConfig:
     connect: tuple[str, ...] = ()
     mode: str = "peer"
     multicast: bool = False
+    tls_dir: str = ""
 
     def __post_init__(self) -> None:
         check_part(self.cell, "cell name")
@@ -56,7 +83,7 @@ class BusConfig:
         """The config as JSON text (passed to child processes)."""
         return json.dumps(
             {"cell": self.cell, "listen": list(self.listen), "connect": list(self.connect),
-             "mode": self.mode, "multicast": self.multicast}
+             "mode": self.mode, "multicast": self.multicast, "tls_dir": self.tls_dir}
         )
 
     @staticmethod
@@ -66,6 +93,7 @@ class BusConfig:
         return BusConfig(
             cell=data["cell"], listen=tuple(data["listen"]), connect=tuple(data["connect"]),
             mode=data.get("mode", "peer"), multicast=bool(data.get("multicast", False)),
+            tls_dir=str(data.get("tls_dir", "")),
         )
 
 
@@ -77,17 +105,32 @@ def _zenoh_config(cfg: BusConfig) -> Any:
     zc.insert_json5("scouting/multicast/enabled", "true" if cfg.multicast else "false")
     zc.insert_json5("listen/endpoints", json.dumps(list(cfg.listen) if cfg.mode == "peer" else []))
     zc.insert_json5("connect/endpoints", json.dumps(list(cfg.connect)))
+    folder = tls_folder(cfg.tls_dir)
+    if folder is not None:
+        apply_tls(zc, folder)
     return zc
 
 
 class Bus:
-    """A process's handle on the cell bus, as node ``node`` of cell ``config.cell``."""
+    """A process's handle on the cell bus, as node ``node`` of cell ``config.cell``.
 
-    def __init__(self, config: BusConfig, node: str) -> None:
+    ``role``: what this session signs as (a launched node, or the operator's CLI/console).
+    ``secret``: the cell's key (``AUTO``: read or made in ``$MESP_HOME``; None: unsigned, a
+    session that nothing on a secured cell obeys).
+    """
+
+    def __init__(self, config: BusConfig, node: str, role: Role = Role.OPERATOR,
+                 secret: bytes | None = AUTO) -> None:
         import zenoh
 
         self.config = config
         self.node = check_part(node, "node name")
+        key_bytes = cell_secret(config.cell) if secret is AUTO else secret
+        self.secret = key_bytes
+        self.signing = Signing(key_bytes, self.node, role) if key_bytes else None
+        self.refused = 0  # messages and commands refused (unsigned, forged, replayed, denied)
+        self.default_authorize: Authorize | None = None  # ``serve``'s check unless given one
+        self._refusal_logged: dict[tuple[str, str], float] = {}
         self._zenoh = zenoh
         self._session = zenoh.open(_zenoh_config(config))
         self._publishers: dict[str, Any] = {}
@@ -96,6 +139,7 @@ class Bus:
         self._closed = False
         self.dropped = 0  # payloads of the wrong type or corrupt, dropped by subscribers
         self._workers: list[queue.Queue[Any]] = []
+        self._watches: list[Any] = []  # presence.PresenceWatch of ``watch_presence``
 
     # -- keys ------------------------------------------------------------------------------
     def key(self, topic: str, node: str | None = None) -> str:
@@ -104,40 +148,94 @@ class Bus:
 
     # -- publish/subscribe -----------------------------------------------------------------
     def publish(self, topic: str, message: Any, express: bool = True) -> None:
-        """Publish a message on this node's ``topic`` (a declared publisher is reused)."""
+        """Publish a message on this node's ``topic`` (a declared publisher is reused).
+
+        A periodic topic (``LOSSY_TOPICS``) may drop a message when the link is congested (the
+        next one supersedes it); any other (stream events, waypoints) waits for room instead:
+        a dropped end-of-stream event left a supervisor waiting for it for good.
+        """
         k = self.key(topic)
         with self._lock:
             pub = self._publishers.get(k)
             if pub is None:
                 z = self._zenoh
+                lossy = topic.split("/")[-1] in LOSSY_TOPICS
+                congestion = z.CongestionControl.DROP if lossy else z.CongestionControl.BLOCK
                 pub = self._session.declare_publisher(
-                    k, congestion_control=z.CongestionControl.DROP, express=express,
+                    k, congestion_control=congestion, express=express,
                     priority=z.Priority.REAL_TIME,
                 )
                 self._publishers[k] = pub
-        pub.put(encode(message))
+        pub.put(self._sign(k, encode(message)))
 
     def publish_to(self, node: str, topic: str, message: Any) -> None:
         """Publish on another node's key (used for the shared ``estop`` topic)."""
         z = self._zenoh
+        k = key(self.config.cell, node, topic)
         self._session.put(
-            key(self.config.cell, node, topic), encode(message),
+            k, self._sign(k, encode(message)),
             congestion_control=z.CongestionControl.BLOCK, priority=z.Priority.REAL_TIME,
             express=True,
         )
 
+    # -- signing -----------------------------------------------------------------------------
+    def _sign(self, key_expr: str, body: bytes, role: Role | None = None) -> bytes:
+        return self.signing.sign(key_expr, body, role) if self.signing else body
+
+    def refuse(self, key_expr: str, why: str) -> None:
+        """Count and log a refused message or command (rate-limited per key and reason)."""
+        self.refused += 1
+        now = time.monotonic()
+        k = (key_expr, why.split(" (")[0])
+        if now - self._refusal_logged.get(k, -1e9) >= 10.0:
+            self._refusal_logged[k] = now
+            log.warning("%s refused a message on %s: %s", self.node, key_expr, why)
+
+    def sender_ok(self, key_expr: str, signer: Signer | None, why: str, sender: str | None) -> bool:
+        """Whether a message on ``key_expr`` comes from whom it must (``subscribe``)."""
+        if sender == ANYONE:
+            return True
+        if sender is None:
+            try:
+                if parse_key(key_expr).node in OPEN_NODES:
+                    return True
+            except ValueError:
+                pass
+        if signer is None:
+            self.refuse(key_expr, why)
+            return False
+        want = sender
+        if want is None:
+            try:
+                want = parse_key(key_expr).node
+            except ValueError:
+                want = ""
+        if signer.name != want:
+            self.refuse(key_expr, f"signed by {signer.name}, not {want}")
+            return False
+        return True
+
     def subscribe(
-        self, node: str, topic: str, kind: type[T], callback: Callable[[T], None]
+        self, node: str, topic: str, kind: type[T], callback: Callable[[T], None],
+        sender: str | None = None,
     ) -> None:
         """Call ``callback(message)`` for every ``kind`` message on ``<node>/<topic>``.
 
-        ``node`` may be ``*``. Payloads of another type or corrupt ones are dropped (counted
-        in ``dropped``) rather than crashing the zenoh callback thread.
+        ``node`` may be ``*``. Only messages signed with the cell's secret by ``sender``
+        (default: the node whose key it is; anyone on the shared ``OPEN_NODES`` keys) are
+        passed on; ``sender=ANYONE`` takes unsigned ones too. Payloads of another type or
+        corrupt ones are dropped (counted in ``dropped``) rather than crashing the zenoh
+        callback thread; unproven ones are refused (``refuse``).
         """
+        verifier = Verifier(self.secret)
 
         def on_sample(sample: Any) -> None:
+            k = str(sample.key_expr)
+            opened = verifier.open(k, sample.payload.to_bytes())
+            if not self.sender_ok(k, opened.signer, opened.why, sender):
+                return
             try:
-                msg = decode(sample.payload.to_bytes(), kind)
+                msg = decode(opened.body, kind)
             except CodecError:
                 self.dropped += 1
                 return
@@ -148,28 +246,51 @@ class Bus:
 
     def subscribe_raw(self, key_expr: str, callback: Callable[[str, bytes], None]) -> None:
         """Call ``callback(key, payload)`` for every sample on ``key_expr`` (wildcards allowed),
-        undecoded: for tools that look at every topic whatever its type (``mesp topic``)."""
+        undecoded and unchecked (the signature removed): for tools that look at every topic
+        whatever its type (``mesp topic``), never for acting on."""
         sub = self._session.declare_subscriber(
-            key_expr, lambda sample: callback(str(sample.key_expr), sample.payload.to_bytes()))
+            key_expr,
+            lambda sample: callback(str(sample.key_expr), split(sample.payload.to_bytes())[0]))
         self._keep.append(sub)
 
     # -- commands (request/reply) ----------------------------------------------------------
-    def serve(self, handler: Callable[[Command], Reply], topic: str = "cmd") -> None:
+    def serve(self, handler: Callable[[Command], Reply], topic: str = "cmd",
+              authorize: Authorize | None = None) -> None:
         """Answer ``Command`` queries on this node's ``topic`` with ``handler``.
+
+        ``authorize(command, signer)`` decides first (default: any sender proven to hold the
+        cell's secret); a refusal is the reply, counted and logged.
 
         The handler runs on a worker thread of its own, one command at a time, and the reply
         is sent from there: zenoh's callback threads only queue the query, so a long command
         (slicing for minutes, a process pool, a nested request) never blocks the session. A
         handler exception becomes a refusal naming it, so a caller always gets one line.
+        After a command that took ``heap.TRIM_AFTER_S`` or more, the freed heap goes back to
+        the OS (``heap.give_back``).
         """
         pending: queue.Queue[Any] = queue.Queue()
+        verifier = Verifier(self.secret)
+        k = self.key(topic)
+
+        def member(cmd: Command, signer: Signer | None) -> str:
+            return "" if signer is not None else "the sender does not hold the cell's secret"
+
+        check = authorize or self.default_authorize or member
 
         def answer(query: Any) -> None:
             cmd: Command | None = None
+            started = time.monotonic()
             try:
                 payload = query.payload
-                cmd = decode(payload.to_bytes() if payload is not None else b"", Command)
-                reply = handler(cmd)
+                opened = verifier.open(k, payload.to_bytes() if payload is not None else b"")
+                cmd = decode(opened.body, Command)
+                denied = check(cmd, opened.signer)
+                if denied:
+                    self.refuse(k, f"{cmd.verb}: {denied}"
+                                   + (f" ({opened.why})" if opened.signer is None else ""))
+                    reply = Reply.refuse(f"{self.node} refused {cmd.verb}: {denied}")
+                else:
+                    reply = handler(cmd)
             except InputError as exc:
                 reply = Reply.refuse(exc.one_line())
             except CodecError as exc:
@@ -178,9 +299,11 @@ class Bus:
                 log.exception("command %s on %s failed", getattr(cmd, "verb", "?"), self.node)
                 reply = Reply.refuse(f"{type(exc).__name__}: {exc}")
             try:
-                query.reply(query.key_expr, encode(reply))
+                query.reply(query.key_expr, self._sign(str(query.key_expr), encode(reply)))
             finally:
                 query.drop()  # completes the query for the caller
+            if time.monotonic() - started >= TRIM_AFTER_S:
+                give_back()  # the heap a long command grew, back to the OS (``heap``)
 
         def worker() -> None:
             while True:
@@ -192,22 +315,29 @@ class Bus:
         thread = threading.Thread(target=worker, name=f"{self.node}-{topic}", daemon=True)
         thread.start()
         self._workers.append(pending)
-        q = self._session.declare_queryable(self.key(topic), pending.put)
+        q = self._session.declare_queryable(k, pending.put)
         self._keep.append(q)
 
     def request(
         self, node: str, command: Command, timeout: float = 5.0, topic: str = "cmd"
     ) -> Reply:
-        """Send ``command`` to ``<node>/<topic>`` and wait for the reply.
+        """Send ``command`` to ``<node>/<topic>`` (signed) and wait for the reply.
 
-        Never raises for a missing node: the reply is a refusal saying nobody answered.
+        Only a reply signed by ``node`` counts (another session answering in its place is
+        refused). Never raises for a missing node: the reply is a refusal saying nobody
+        answered.
         """
         k = key(self.config.cell, node, topic)
-        replies = self._session.get(k, payload=encode(command), timeout=timeout)
+        replies = self._session.get(k, payload=self._sign(k, encode(command)), timeout=timeout)
+        verifier = Verifier(self.secret)
         for r in replies:
             if r.ok is not None:
+                opened = verifier.open(str(r.ok.key_expr), r.ok.payload.to_bytes())
+                if self.secret is not None and not self.sender_ok(
+                        str(r.ok.key_expr), opened.signer, opened.why, node):
+                    continue
                 try:
-                    return decode(r.ok.payload.to_bytes(), Reply)
+                    return decode(opened.body, Reply)
                 except CodecError as exc:
                     return Reply.refuse(f"{node} sent a malformed reply ({exc})")
         return Reply.refuse(
@@ -221,10 +351,18 @@ class Bus:
         self._keep.append(tok)
 
     def watch_presence(self, callback: Callable[[str, bool], None]) -> None:
-        """Call ``callback(node, alive)`` when a node's token appears or disappears.
+        """Call ``callback(node, alive)`` when a node appears or disappears.
 
-        Tokens present when the watch starts are reported as appearing.
+        With the cell's secret a node is present while it holds its liveliness token and its
+        signed heartbeats keep coming (``presence.PresenceWatch``: a token alone can be
+        forged); without, its token alone counts. Nodes present when the watch starts are
+        reported as appearing.
         """
+        if self.secret is not None:
+            from mesp_cell.bus.presence import PresenceWatch
+
+            self._watches.append(PresenceWatch(self, callback))
+            return
         z = self._zenoh
 
         def on_sample(sample: Any) -> None:
@@ -239,8 +377,24 @@ class Bus:
         )
         self._keep.append(sub)
 
+    def presence_warm(self, timeout: float = 1.5) -> None:
+        """Wait until this session's presence watches have seen every node's heartbeat (a node
+        calls it before it announces itself, so when it counts as up, so does its view)."""
+        for watch in self._watches:
+            watch.warm(timeout)
+
+    def keep(self, entity: Any) -> None:
+        """Keep a declared zenoh entity until the bus closes."""
+        self._keep.append(entity)
+
+    @property
+    def closed(self) -> bool:
+        """The session is closed."""
+        return self._closed
+
     def alive_nodes(self, timeout: float = 1.0) -> set[str]:
-        """Names of the nodes whose liveliness token is present now."""
+        """Names of the nodes whose liveliness token is present now (tokens only: for
+        display and tests; what acts on presence uses ``watch_presence``)."""
         out: set[str] = set()
         for r in self._session.liveliness().get(key(self.config.cell, "*", "alive"),
                                                 timeout=timeout):

@@ -4,6 +4,13 @@ States follow the managed-node pattern: unconfigured -> (configure) -> inactive 
 -> active -> (deactivate) -> inactive -> (shutdown) -> finalized. ``configure`` opens the bus
 and the devices, ``activate`` starts publishing and serving, ``deactivate`` makes the node's
 devices safe (motion and extrusion stop), ``shutdown`` closes everything.
+
+Authority: the node's bus session signs as a cell ``node`` (``bus_role``; the console signs as
+the operator). Every command it serves is first checked for its sender
+(``command_policy``: the supervisor, the operator, or the node a verb is for) and then for its
+arguments (``command_checks``), whichever way the node serves it; a refusal is the reply and
+is logged. Presence: the liveliness token goes up with the first signed heartbeat, and other
+nodes count this one present only while both come (``mesp_cell.bus.presence``).
 """
 
 from __future__ import annotations
@@ -20,6 +27,9 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from mesp_cell.bus.session import Bus, BusConfig
+from mesp_cell.bus.signing import Role, Signer
+from mesp_cell.command_checks import argument_refusal
+from mesp_cell.command_policy import sender_refusal
 from mesp_cell.messages import Command, Heartbeat, Reply
 
 log = logging.getLogger("mesp")
@@ -45,6 +55,7 @@ class LifecycleNode:
     """Base class of a node process. Subclasses override the ``on_*`` hooks."""
 
     heartbeat_s = 0.5
+    bus_role = Role.NODE  # what the node's bus session signs as
 
     def __init__(self, name: str, bus_config: BusConfig, params: dict[str, Any]) -> None:
         self.name = name
@@ -76,7 +87,8 @@ class LifecycleNode:
     # -- transitions -----------------------------------------------------------------------
     def configure(self) -> None:
         assert self.state == "unconfigured"
-        self.bus = Bus(self.bus_config, self.name)
+        self.bus = Bus(self.bus_config, self.name, role=self.bus_role)
+        self.bus.default_authorize = self.authorize
         self.on_configure()
         self.state = "inactive"
 
@@ -84,7 +96,9 @@ class LifecycleNode:
         assert self.state == "inactive" and self.bus is not None
         self.on_activate()
         self.state = "active"
-        self.bus.announce()  # presence only once the node can do its job
+        self.bus.presence_warm()  # its view of the others is up before it counts as up
+        self._beat()  # presence only once the node can do its job: a signed beat, then the token
+        self.bus.announce()
         self.spawn(self._heartbeat, "heartbeat")
 
     def deactivate(self) -> None:
@@ -131,6 +145,19 @@ class LifecycleNode:
         worker = f"{self.bus.node}-{topic}"  # the name Bus.serve gives its worker thread
         self._workers += [t for t in threading.enumerate() if t not in before and t.name == worker]
 
+    def authorize(self, cmd: Command, signer: Signer | None) -> str:
+        """'' if this node takes ``cmd`` from ``signer``, else the one-line reason it does not
+        (the sender first, then the arguments)."""
+        kind = type(self).__name__
+        return (sender_refusal(kind, cmd, signer, self.params)
+                or argument_refusal(kind, self, cmd))
+
+    def _beat(self) -> None:
+        assert self.bus is not None
+        self._seq += 1
+        self.bus.publish("heartbeat", Heartbeat(self.name, self.state, self._seq, os.getpid(),
+                                                time.time()), express=False)
+
     def _heartbeat(self) -> None:
         while not self.stopping.wait(self.heartbeat_s):
             if self.bus is None:
@@ -140,9 +167,7 @@ class LifecycleNode:
                 self.failed = f"worker thread {dead[0]} died"
                 self.state = "failed"
                 log.error("%s: %s; stopping so the launcher restarts it", self.name, self.failed)
-            self._seq += 1
-            self.bus.publish("heartbeat", Heartbeat(self.name, self.state, self._seq, os.getpid(),
-                                                    time.time()), express=False)
+            self._beat()
             if dead:
                 self.stopping.set()
                 return

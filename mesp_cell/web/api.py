@@ -191,7 +191,7 @@ def build_app(ctx: ConsoleContext) -> FastAPI:
             raise ApiError(413, exc.one_line()) from exc
         except InputError as exc:
             raise ApiError(400, exc.one_line()) from exc
-        rec = ctx.store.submit(path, ctx.cell, ctx.home / "jobs", job_path)
+        rec = ctx.store.submit(path, ctx.cell, job_path)
         return job_json(rec, ctx.store.history(rec.id))
 
     @app.get("/api/jobs/{job_id}", dependencies=read, summary="a job with its history")

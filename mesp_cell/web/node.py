@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from mesp_cell.bus.signing import Role
 from mesp_cell.messages import ExtruderState, JobProgress, RobotState
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from mesp_cell.web.live import LiveState
@@ -48,6 +49,8 @@ def console_urls(processes: Sequence[Any]) -> list[str]:
 class ConsoleNode(LifecycleNode):
     """See the module docstring."""
 
+    bus_role = Role.OPERATOR  # it passes on the operator's commands
+
     def on_configure(self) -> None:
         import uvicorn
 
@@ -65,10 +68,15 @@ class ConsoleNode(LifecycleNode):
                                  "give port and max_upload_mb as numbers") from exc
         home = Path(os.environ.get("MESP_HOME") or Path.home() / ".mesp")
         remote = not is_loopback(self.host)
-        token = load_token(home, create=remote)
+        # made at the first start wherever it binds: on loopback too, another user of the
+        # host must not act as the operator through the console (docs/security.md)
+        token = load_token(home, create=True)
         if remote:
             log.info("console bound to %s: every call needs the bearer token in %s",
                      self.host, token_path(home))
+        else:
+            log.info("console: the motion and e-stop endpoints need the bearer token in %s",
+                     token_path(home))
         assert self.bus is not None
         self.live = LiveState(float(p.get("dt", 0.002)))
         cell_file = str(p.get("cell_file", "") or "")

@@ -48,9 +48,10 @@ def _fails_fast(client: CellClient, job_id: str) -> str:
 def test_bad_jobs_fail_fast_and_a_good_one_prints(cell: Launch, client: CellClient,
                                                   tmp_path: Path) -> None:
     # A garbage .vtu in the queue (put there through the API, past `mesp job submit`'s check).
-    garbage = tmp_path / "garbage.vtu"
+    (client.home / "import").mkdir(exist_ok=True)
+    garbage = client.home / "import" / "garbage.vtu"
     garbage.write_bytes(b"<?xml \x00\xff garbage" * 5)
-    job = client.store.submit(garbage, client.cell, client.home / "jobs")
+    job = client.store.submit(garbage, client.cell)
     assert "not a readable tet mesh" in _fails_fast(client, job.id)
 
     # The slicing library calls sys.exit: the node refuses the job and keeps serving.

@@ -11,15 +11,18 @@ import pytest
 
 from core.errors import InputError
 from mesp_cell.bus.session import Bus, BusConfig
+from mesp_cell.bus.signing import Role
 from mesp_cell.drivers.extruder_emulator import free_port
 from mesp_cell.messages import Command, EStop, Heartbeat, Reply
+
+KEY = b"k" * 32
 
 
 @pytest.fixture
 def pair() -> Iterator[tuple[Bus, Bus]]:
     hub = f"tcp/127.0.0.1:{free_port()}"
-    a = Bus(BusConfig(cell="t", listen=(hub,)), "alpha")
-    b = Bus(BusConfig(cell="t", connect=(hub,)), "beta")
+    a = Bus(BusConfig(cell="t", listen=(hub,)), "alpha", Role.NODE, KEY)
+    b = Bus(BusConfig(cell="t", connect=(hub,)), "beta", Role.OPERATOR, KEY)
     time.sleep(0.3)
     yield a, b
     b.close()
@@ -82,10 +85,15 @@ def test_presence_follows_the_session(pair: tuple[Bus, Bus]) -> None:
         if node == "alpha" and not alive:
             gone.set()
 
+    a.publish("heartbeat", Heartbeat("alpha", "active", 1, 1, time.time()))
     a.announce()
     b.watch_presence(on)
     time.sleep(0.3)
     assert "alpha" in b.alive_nodes(1.0)
+    a.publish("heartbeat", Heartbeat("alpha", "active", 2, 1, time.time()))
+    end = time.monotonic() + 5
+    while ("alpha", True) not in events and time.monotonic() < end:
+        time.sleep(0.02)
     a.close()
     assert wait(gone)
     assert ("alpha", True) in events and events[-1] == ("alpha", False)

@@ -122,9 +122,10 @@ def test_status_line_gives_the_eta_as_hours_and_minutes(tmp_path: Path) -> None:
 
     assert (hmm(106_000), hmm(59), hmm(0), hmm(3600)) == ("29:27", "0:01", "0:00", "1:00")
     store = JobStore(tmp_path / "jobs.sqlite")
-    model = tmp_path / "part.stl"
+    (tmp_path / "import").mkdir()
+    model = tmp_path / "import" / "part.stl"  # the store takes models from its import folder
     model.write_text("solid p\nendsolid p\n")
-    job = store.submit(model, "sim", tmp_path / "jobs")
+    job = store.submit(model, "sim")
     for state in ("sliced", "planned", "ready_check", "printing"):
         store.transition(job.id, state)
     store.set_sizes(job.id, 10, 100, 1000)

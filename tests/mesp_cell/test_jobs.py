@@ -21,13 +21,14 @@ def store(tmp_path: Path) -> JobStore:
 
 @pytest.fixture
 def model(tmp_path: Path) -> Path:
-    p = tmp_path / "My Part.stl"
+    (tmp_path / "import").mkdir(exist_ok=True)
+    p = tmp_path / "import" / "My Part.stl"
     synthetic.write_cube(p)  # a real model: submit loads it
     return p
 
 
 def test_lifecycle_and_history(store: JobStore, model: Path, tmp_path: Path) -> None:
-    job = store.submit(model, "sim", tmp_path / "jobs")
+    job = store.submit(model, "sim")
     assert job.id == "my-part-0001" and job.state == "submitted" and Path(job.dir).is_dir()
     for state in ("sliced", "planned", "ready_check", "printing", "interrupted", "printing",
                   "done"):
@@ -39,7 +40,7 @@ def test_lifecycle_and_history(store: JobStore, model: Path, tmp_path: Path) -> 
 
 def test_invalid_transitions_are_refused_with_the_reason(store: JobStore, model: Path,
                                                          tmp_path: Path) -> None:
-    job = store.submit(model, "sim", tmp_path / "jobs")
+    job = store.submit(model, "sim")
     with pytest.raises(InputError, match="submitted; it can become only"):
         store.transition(job.id, "printing")
     store.transition(job.id, "aborted")
@@ -55,7 +56,7 @@ def test_invalid_transitions_are_refused_with_the_reason(store: JobStore, model:
 
 def test_checkpoint_only_moves_forward_and_resume_flag(store: JobStore, model: Path,
                                                       tmp_path: Path) -> None:
-    job = store.submit(model, "sim", tmp_path / "jobs")
+    job = store.submit(model, "sim")
     for state in ("sliced", "planned", "ready_check", "printing"):
         store.transition(job.id, state)
     store.checkpoint(job.id, 1, 30, 600)
@@ -73,12 +74,12 @@ def test_checkpoint_only_moves_forward_and_resume_flag(store: JobStore, model: P
 
 def test_two_connections_see_each_other(store: JobStore, model: Path, tmp_path: Path) -> None:
     other = JobStore(store.path)
-    job = store.submit(model, "sim", tmp_path / "jobs")
+    job = store.submit(model, "sim")
     other.transition(job.id, "sliced")
     assert store.get(job.id).state == "sliced"
     with pytest.raises(InputError, match="not submitted"):
         store.transition(job.id, "failed", expect="submitted")
-    second = other.submit(model, "sim", tmp_path / "jobs")
+    second = other.submit(model, "sim")
     assert second.id != job.id
     assert [j.id for j in store.query("sim")] == [job.id, second.id]
 
@@ -141,8 +142,8 @@ def test_waiting_without_progress_times_out_but_a_print_that_advances_does_not(
 
 def test_a_fresh_print_waits_in_ready_check_until_confirmed(store: JobStore, model: Path,
                                                             tmp_path: Path) -> None:
-    first = store.submit(model, "sim", tmp_path / "jobs")
-    second = store.submit(model, "sim", tmp_path / "jobs")
+    first = store.submit(model, "sim")
+    second = store.submit(model, "sim")
     for job in (first, second):
         store.transition(job.id, "sliced")
         store.transition(job.id, "planned")
@@ -168,7 +169,7 @@ def test_a_fresh_print_waits_in_ready_check_until_confirmed(store: JobStore, mod
     assert store.next_pending("sim") is None
     store.transition(second.id, "printing")
     store.transition(second.id, "paused")  # a paused job holds the tank: nothing else parks
-    third = store.submit(model, "sim", tmp_path / "jobs")
+    third = store.submit(model, "sim")
     store.transition(third.id, "sliced")
     store.transition(third.id, "planned")
     assert store.next_pending("sim") is None
@@ -184,9 +185,12 @@ def test_job_ids_are_made_by_the_store_and_stay_in_its_folder(store: JobStore,
     import inspect
 
     assert "job_id" not in inspect.signature(store.submit).parameters
-    odd = tmp_path / "..%2F..%2Fx .. ; rm -rf.stl"
+    with pytest.raises(TypeError):
+        store.submit(tmp_path / "a.stl", "sim", job_id="../../x")  # type: ignore[call-arg]
+    (tmp_path / "import").mkdir()
+    odd = tmp_path / "import" / "..%2F..%2Fx .. ; rm -rf.stl"
     synthetic.write_cube(odd)
-    job = store.submit(odd, "sim", tmp_path / "jobs")
+    job = store.submit(odd, "sim")
     assert Path(job.dir).resolve().parent == (tmp_path / "jobs").resolve()
     assert all(c.isalnum() or c == "-" for c in job.id)
 
@@ -202,3 +206,62 @@ def test_submission_refuses_what_the_slicer_cannot_read(tmp_path: Path) -> None:
     os.symlink("/etc/shadow", tmp_path / "shadow.stl")
     with pytest.raises(InputError, match="outside its folder"):
         check_submission(tmp_path / "shadow.stl")
+
+
+def test_models_are_copied_from_an_import_folder_only(store: JobStore, model: Path,
+                                                      tmp_path: Path) -> None:
+    import os
+    import stat
+
+    job = store.submit(model, "sim")
+    copy = Path(job.model)
+    assert copy.parent == Path(job.dir) and copy.read_bytes() == model.read_bytes()
+    model.write_bytes(b"changed after submission")  # the job keeps its own copy
+    assert copy.read_bytes() != model.read_bytes()
+    outside = tmp_path / "elsewhere.stl"
+    synthetic.write_cube(outside)
+    with pytest.raises(InputError, match="not in an import folder"):
+        store.submit(outside, "sim")
+    os.symlink("/etc/shadow", tmp_path / "import" / "shadow.stl")
+    with pytest.raises(InputError, match="outside the import folder"):
+        store.submit(tmp_path / "import" / "shadow.stl", "sim")
+    os.symlink(outside, tmp_path / "import" / "out.stl")
+    with pytest.raises(InputError, match="outside the import folder"):
+        store.submit(tmp_path / "import" / "out.stl", "sim")
+    for path in (store.path, copy):
+        assert stat.S_IMODE(path.stat().st_mode) == 0o600, path
+    for path in (store.path.parent, Path(job.dir)):
+        assert stat.S_IMODE(path.stat().st_mode) == 0o700, path
+
+
+def test_the_client_imports_the_operators_files(model: Path, tmp_path: Path) -> None:
+    import os
+
+    client = CellClient("sim", None, tmp_path / "home")
+    outside = tmp_path / "part.stl"
+    synthetic.write_cube(outside)
+    job = client.submit(outside)
+    assert Path(job.model).parent == Path(job.dir)
+    assert Path(job.dir).parent == tmp_path / "home" / "jobs"
+    assert not any((tmp_path / "home" / "import").iterdir())  # staged copies removed
+    os.symlink("/etc/shadow", tmp_path / "shadow.stl")
+    with pytest.raises(InputError, match="outside its folder"):
+        client.submit(tmp_path / "shadow.stl")
+    client.close()
+
+
+def test_a_job_names_only_profiles_of_the_profile_folders(model: Path, tmp_path: Path) -> None:
+    home = tmp_path / "home"
+    (home / "profiles").mkdir(parents=True)
+    lab = home / "profiles" / "lab.toml"
+    lab.write_text((Path("slicer/profiles/ecoflex-0030.toml")).read_text())
+    job = tmp_path / "job.toml"
+    for ok in ("active", "ecoflex-0030", str(lab)):
+        job.write_text(f'[extrusion]\nprofile = "{ok}"\n')
+        check_submission(model, job_file=job, home=home)
+    stray = tmp_path / "stray.toml"
+    stray.write_text(lab.read_text())
+    for bad in (str(stray), "/etc/passwd", str(home / "profiles" / ".." / "x.toml")):
+        job.write_text(f'[extrusion]\nprofile = "{bad}"\n')
+        with pytest.raises(InputError):
+            check_submission(model, job_file=job, home=home)

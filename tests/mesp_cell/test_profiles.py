@@ -85,9 +85,10 @@ def test_job_status_shows_the_jobs_and_the_cells_profile(home: Path, tmp_path: P
     from mesp_cell.jobs import JobStore
 
     store = JobStore(home / "jobs.sqlite")
-    model = tmp_path / "part.stl"
+    (home / "import").mkdir(exist_ok=True)
+    model = home / "import" / "part.stl"  # the store takes models from its import folder
     model.write_text("solid p\nendsolid p\n")
-    job = store.submit(model, "sim", home / "jobs")
+    job = store.submit(model, "sim")
     assert "not sliced yet; cell 'sim' prints with ecoflex-0030" in profile_line(job)
     profiles.active("sim").save_to_job(Path(job.dir))
     assert "(the cell's active profile)" in profile_line(job)
