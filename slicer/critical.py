@@ -10,9 +10,10 @@ selector's cone (design.md, ``--critical``). The slicing field is constant on ea
 
 Regions that touch share one value of the field (one layer lies on both). A start and an end
 surface that touch at a sharp edge (a thin sheet whose top and bottom faces meet, the rim of an
-ear: mean outward normals more than 90 deg apart) would make the layers grow out of one and end on the other at the same value: they
-fold back between the two, and their printing directions point downward. The smaller of such
-a pair is dropped before the field is built, with a note naming it (``resolve_folds``).
+ear: mean outward normals more than 90 deg apart) would make the layers grow out of one and end
+on the other at the same value: they fold back between the two, and their printing directions
+point downward. The smaller of such a pair is dropped before the field is built, with a note
+naming it (``resolve_folds``).
 """
 
 from __future__ import annotations
@@ -100,8 +101,8 @@ def resolve_folds(regions: Sequence[CriticalRegion], vertices: np.ndarray
     at a sharp edge.
 
     Largest first, a region is kept unless it shares a vertex with a kept region of the
-    opposite sign whose mean outward normal lies more than 90 deg from its own; each dropped one gets a note naming it (selector, area, centre) and the
-    region it touches.
+    opposite sign whose mean outward normal lies more than 90 deg from its own; each dropped
+    one gets a note naming it (selector, area, centre) and the region it touches.
 
     Args:
         regions: the selected regions, in their order (kept regions keep it).
