@@ -94,14 +94,3 @@ def stream_refusal(node: Any, cmd: Command) -> str:
         return (f"stream would start {diff[j]:.1f} deg from the arm's pose (joint {j + 1}), "
                 f"more than {START_TOL_DEG:g} deg; move to sample {start} first")
     return ""
-
-
-def argument_refusal(node_class: str, node: Any, cmd: Command) -> str:
-    """'' if the arguments of ``cmd`` are acceptable for the node, else why not."""
-    if node_class == "ExtruderNode":
-        return rate_refusal(cmd)
-    if node_class == "RobotNode" and cmd.verb == "load":
-        return load_refusal(node, cmd)
-    if node_class == "RobotNode" and cmd.verb == "stream":
-        return stream_refusal(node, cmd)
-    return ""

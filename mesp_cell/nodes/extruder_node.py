@@ -16,6 +16,7 @@ import time
 from collections.abc import Sequence
 from typing import Any
 
+from mesp_cell.command_checks import rate_refusal
 from mesp_cell.drivers.extruder_base import ExtruderDriver, ExtruderLinkError
 from mesp_cell.messages import FAULT_ESTOP, FAULT_LINK, Command, EStop, ExtruderState, Reply
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
@@ -107,6 +108,9 @@ class ExtruderNode(LifecycleNode):
         self._safe_stop(f"e-stop from {msg.source}", estop=True)
 
     # -- commands --------------------------------------------------------------------------
+    def argument_refusal(self, cmd: Command) -> str:
+        return rate_refusal(cmd)
+
     def _on_command(self, cmd: Command) -> Reply:
         verb = cmd.verb
         try:

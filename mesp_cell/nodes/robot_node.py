@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from core.errors import InputError
+from mesp_cell.command_checks import load_refusal, stream_refusal
 from mesp_cell.drivers.robot_base import RobotDriver, RobotLinkError, ServoConfig
 from mesp_cell.drivers.stream import ServoStream, StreamPlan, StreamResult
 from mesp_cell.messages import (
@@ -337,6 +338,13 @@ class RobotNode(LifecycleNode):
         return round(seconds * self.servo.time_scale / plan.dt)
 
     # -- commands --------------------------------------------------------------------------
+    def argument_refusal(self, cmd: Command) -> str:
+        if cmd.verb == "load":
+            return load_refusal(self, cmd)
+        if cmd.verb == "stream":
+            return stream_refusal(self, cmd)
+        return ""
+
     def _on_command(self, cmd: Command) -> Reply:
         verb = cmd.verb
         if verb == "stop":
