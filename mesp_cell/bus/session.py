@@ -155,6 +155,11 @@ class Bus:
         a dropped end-of-stream event left a supervisor waiting for it for good.
         """
         k = self.key(topic)
+        self._publisher(topic, express).put(self._sign(k, encode(message)))
+
+    def _publisher(self, topic: str, express: bool = True) -> Any:
+        """The declared zenoh publisher of this node's ``topic`` (declared on first use)."""
+        k = self.key(topic)
         with self._lock:
             pub = self._publishers.get(k)
             if pub is None:
@@ -166,7 +171,21 @@ class Bus:
                     priority=z.Priority.REAL_TIME,
                 )
                 self._publishers[k] = pub
-        pub.put(self._sign(k, encode(message)))
+        return pub
+
+    def wait_subscribed(self, topic: str, timeout: float = 5.0) -> bool:
+        """Wait until some session subscribes to this node's ``topic``; whether one did.
+
+        A subscription takes a moment to reach the publisher's router; what is published before
+        that is lost, so a publisher whose first message matters waits here first.
+        """
+        pub = self._publisher(topic)
+        end = time.monotonic() + timeout
+        while not pub.matching_status.matching:
+            if time.monotonic() >= end:
+                return False
+            time.sleep(0.01)
+        return True
 
     def publish_to(self, node: str, topic: str, message: Any) -> None:
         """Publish on another node's key (used for the shared ``estop`` topic)."""
@@ -343,6 +362,19 @@ class Bus:
         return Reply.refuse(
             f"no reply from node '{node}' of cell '{self.config.cell}' within {timeout:g} s"
         )
+
+    def wait_served(self, node: str, topic: str = "cmd", timeout: float = 5.0) -> bool:
+        """Wait until ``<node>/<topic>`` has a server this session can reach; whether it has."""
+        querier = self._session.declare_querier(key(self.config.cell, node, topic))
+        try:
+            end = time.monotonic() + timeout
+            while not querier.matching_status.matching:
+                if time.monotonic() >= end:
+                    return False
+                time.sleep(0.01)
+            return True
+        finally:
+            querier.undeclare()
 
     # -- presence --------------------------------------------------------------------------
     def announce(self) -> None:

@@ -43,8 +43,9 @@ def test_publish_subscribe_typed(pair: tuple[Bus, Bus]) -> None:
         if len(got) == 3:
             done.set()
 
+    assert not a.wait_subscribed("heartbeat", timeout=0.1)
     b.subscribe("alpha", "heartbeat", Heartbeat, on)
-    time.sleep(0.2)
+    assert a.wait_subscribed("heartbeat")
     a.publish("heartbeat", EStop("x", "wrong type on this topic", 0.0))
     for i in range(3):
         a.publish("heartbeat", Heartbeat("alpha", "active", i, 1, float(i)))
@@ -66,8 +67,9 @@ def test_request_reply_and_refusals(pair: tuple[Bus, Bus],
             raise RuntimeError("boom")
         return Reply.done(echo=cmd.arg("x"))
 
+    assert not b.wait_served("alpha", timeout=0.1)
     a.serve(handler)
-    time.sleep(0.2)
+    assert b.wait_served("alpha")
     assert b.request("alpha", Command.make("ok", x=3)).value("echo") == 3
     assert b.request("alpha", Command.make("bad")).reason == "bad input; fix it"
     assert "boom" in b.request("alpha", Command.make("bug")).reason
