@@ -97,6 +97,13 @@ class BusConfig:
         )
 
 
+def _matching(entity: Any) -> bool:
+    """Whether a zenoh publisher or querier has a matching peer (its stub says a bool; it is a
+    ``MatchingStatus``)."""
+    status: Any = entity.matching_status
+    return bool(status.matching)
+
+
 def _zenoh_config(cfg: BusConfig) -> Any:
     import zenoh
 
@@ -181,7 +188,7 @@ class Bus:
         """
         pub = self._publisher(topic)
         end = time.monotonic() + timeout
-        while not pub.matching_status.matching:
+        while not _matching(pub):
             if time.monotonic() >= end:
                 return False
             time.sleep(0.01)
@@ -368,7 +375,7 @@ class Bus:
         querier = self._session.declare_querier(key(self.config.cell, node, topic))
         try:
             end = time.monotonic() + timeout
-            while not querier.matching_status.matching:
+            while not _matching(querier):
                 if time.monotonic() >= end:
                     return False
                 time.sleep(0.01)
