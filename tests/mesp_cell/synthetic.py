@@ -28,15 +28,23 @@ RATE_HZ = 100.0  # trajectory sample rate
 TRAVEL = 12     # non-depositing samples between layers
 
 
-def toolpath() -> Toolpath:
-    """LAYERS square-ish contours of PER_LAYER waypoints, 0.6 mm apart in z."""
+def toolpath(rate: float | None = None) -> Toolpath:
+    """LAYERS square-ish contours of PER_LAYER waypoints, 0.6 mm apart in z.
+
+    With ``rate`` (mm^3/s, the extruder's C) the width makes the toolpath's volume the ink the
+    cell extrudes along ``trajectory_arrays`` (STEP / RATE_HZ s of deposition per waypoint),
+    as a real plan's is; else 1.2 mm."""
     n = LAYERS * PER_LAYER
     layer = np.repeat(np.arange(LAYERS), PER_LAYER).astype(np.int32)
     ang = np.tile(np.linspace(0.0, 2 * np.pi, PER_LAYER, endpoint=False), LAYERS)
     pos = np.stack([10 * np.cos(ang), 10 * np.sin(ang), 0.6 * layer], axis=1)
     normal = np.tile([0.0, 0.0, 1.0], (n, 1))
+    width = 1.2
+    if rate is not None:  # PER_LAYER waypoints of deposition over PER_LAYER - 1 segments
+        seg = float(np.linalg.norm(pos[1] - pos[0]))
+        width = rate * PER_LAYER * STEP / RATE_HZ / ((PER_LAYER - 1) * seg * 0.6)
     return Toolpath(position=pos, normal=normal, layer=layer, path=layer.copy(),
-                    height=np.full(n, 0.6), width=np.full(n, 1.2), speed=np.full(n, 9.0),
+                    height=np.full(n, 0.6), width=np.full(n, width), speed=np.full(n, 9.0),
                     extrude=np.ones(n, bool), pattern=np.zeros(n, np.int8))
 
 
@@ -78,8 +86,9 @@ def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
 
     if not Path(model).is_file():
         raise InputError(f"model {model} does not exist", "check the path")
-    toolpath().save(Path(out_dir))
-    active(cell).save_to_job(Path(out_dir))  # the cell's calibration, as the real slicer
+    profile = active(cell)
+    toolpath(profile.rate_mm3_s).save(Path(out_dir))
+    profile.save_to_job(Path(out_dir))  # the cell's calibration, as the real slicer
     return {}
 
 
