@@ -125,6 +125,7 @@ class Run:
 
     fault: str
     at_percent: float = 0.0
+    command_s: float = 0.0  # e-stop: s from the command's start to the e-stop on the bus
     motion_stop_s: float = float("nan")
     screw_stop_s: float = float("nan")
     stopped: bool = False
@@ -147,12 +148,15 @@ class Campaign:
         self.launch: Any = None
         self.client: Any = None
         self.robot_stop_t = 0.0
+        self.estop_sent = 0.0
         self.model = home / "cube.stl"
+        self._old_home: str | None = None
 
     def start(self) -> None:
         from mesp_cell.launcher import start_cell
-        from mesp_cell.messages import RobotState
+        from mesp_cell.messages import EStop, RobotState
 
+        self._old_home = os.environ.get("MESP_HOME")
         os.environ["MESP_HOME"] = str(self.home)
         self.launch = start_cell(overrides=self.overrides, timeout=60.0)
         self.client = self.launch.client()
@@ -161,13 +165,21 @@ class Campaign:
             if m.stop_t > self.robot_stop_t:
                 self.robot_stop_t = m.stop_t
 
+        def on_estop(m: EStop) -> None:
+            self.estop_sent = m.t
+
         self.client.bus().subscribe("robot", "state", RobotState, on_robot)
+        self.client.bus().subscribe("estop", "estop", EStop, on_estop)
 
     def stop(self) -> None:
         if self.client is not None:
             self.client.close()
         if self.launch is not None:
             self.launch.stop()
+        if self._old_home is None:
+            os.environ.pop("MESP_HOME", None)
+        else:
+            os.environ["MESP_HOME"] = self._old_home
 
     @property
     def port(self) -> int:
@@ -204,20 +216,15 @@ class Campaign:
             watch.close()
         if self.robot_stop_t > t:
             run.motion_stop_s = self.robot_stop_t - t
+        if fault == "estop" and self.estop_sent > t:
+            run.command_s = self.estop_sent - t
         self.recover(fault)
-        state = self.client.wait(job.id, timeout=600.0) if fault not in STOPS else None
-        if fault in STOPS or (state is not None and state.state == "interrupted"):
-            end = time.monotonic() + 30.0
-            while self.client.status(job.id).state == "printing" and time.monotonic() < end:
-                time.sleep(0.05)
-            run.stopped = self.client.status(job.id).state == "interrupted"
-            if run.stopped:
-                self.resume(job.id)
-                run.resumed = True
-            final = self.client.wait(job.id, timeout=600.0)
-        else:
-            final = state
-        assert final is not None
+        final = self.settled(job.id, 600.0 if fault not in STOPS else 30.0)
+        if final.state == "interrupted":
+            run.stopped = True
+            self.resume(job.id)
+            run.resumed = True
+            final = self.settled(job.id, 600.0)
         run.state, run.reason = final.state, final.reason
         job_dir = Path(self.client.store.get(job.id).dir)
         printed = print_ledger.read(job_dir)
@@ -293,6 +300,22 @@ class Campaign:
             self.start()
         time.sleep(0.5)
 
+    def clear(self) -> None:
+        """Abort the jobs a failed run left in the tank (they hold the queue)."""
+        for job in self.client.store.query(self.client.cell, ("interrupted", "paused")):
+            self.client.command("abort", job.id)
+        time.sleep(2.0)
+
+    def settled(self, job_id: str, timeout: float) -> Any:
+        """The job once it is no longer printing (or waiting to), or after ``timeout``."""
+        end = time.monotonic() + timeout
+        while True:
+            job = self.client.status(job_id)
+            if job.state not in ("printing", "ready_check", "planned") or (
+                    time.monotonic() > end):
+                return job
+            time.sleep(0.05)
+
     def resume(self, job_id: str) -> None:
         end = time.monotonic() + 60.0
         while True:
@@ -324,7 +347,11 @@ def campaign(faults: list[str], runs: int, time_scale: float, backend: str, seed
     try:
         for _ in range(runs):
             for fault in faults:
-                r = c.run(fault, rng)
+                try:
+                    r = c.run(fault, rng)
+                except RuntimeError as exc:  # the run could not be made (counted as such)
+                    r = Run(fault, state="not run", reason=str(exc))
+                    c.clear()
                 on_run(r)
                 out.append(r)
     finally:
@@ -345,11 +372,16 @@ def table(runs: list[Run]) -> str:
     rows = ["| fault | runs | arm stop ms (median / max) | screw stop ms (median / max) | "
             "resumed | done | lost | doubled | store ok |",
             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+    # an e-stop's times are from the command; its start-up is also shown on its own
     for fault in dict.fromkeys(r.fault for r in runs):
-        rs = [r for r in runs if r.fault == fault]
+        rs = [r for r in runs if r.fault == fault and r.state != "not run"]
+        if not rs:
+            continue
+        stops = fault in STOPS  # the others must not stop the print: no stop times
+        arm = _ms([r.motion_stop_s for r in rs]) if stops else "prints on"
+        screw = _ms([r.screw_stop_s for r in rs]) if stops else "prints on"
         rows.append(
-            f"| {fault} | {len(rs)} | {_ms([r.motion_stop_s for r in rs])} | "
-            f"{_ms([r.screw_stop_s for r in rs])} | {sum(r.resumed for r in rs)} | "
+            f"| {fault} | {len(rs)} | {arm} | {screw} | {sum(r.resumed for r in rs)} | "
             f"{sum(r.state == 'done' for r in rs)} | {sum(max(r.lost, 0) for r in rs)} | "
             f"{sum(max(r.doubled, 0) for r in rs)} | {sum(r.store_ok for r in rs)}/{len(rs)} |")
     return "\n".join(rows)
@@ -373,6 +405,7 @@ def main(argv: list[str] | None = None) -> int:
 
     def show(r: Run) -> None:
         print(f"{r.fault:16s} at {r.at_percent:4.0f} %: arm {r.motion_stop_s * 1000:6.1f} ms, "
+              f"(command start-up {r.command_s * 1000:.0f} ms) "
               f"screw {r.screw_stop_s * 1000:6.1f} ms, resumed {r.resumed}, {r.state} "
               f"{r.reason[:60]!r}, lost {r.lost}, doubled {r.doubled}, volume "
               f"{100 * r.volume_error:+.2f} %, store ok {r.store_ok} {' '.join(r.notes)}",
@@ -381,6 +414,10 @@ def main(argv: list[str] | None = None) -> int:
     runs = campaign(faults, args.runs, args.time_scale, args.backend, args.seed, args.cache,
                     args.size_mm, show)
     print(table(runs))
+    skipped = [r for r in runs if r.state == "not run"]
+    if skipped:
+        print(f"{len(skipped)} runs could not be made: " + "; ".join(
+            f"{r.fault}: {r.reason}" for r in skipped))
     return 0
 
 

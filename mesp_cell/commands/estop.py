@@ -49,7 +49,8 @@ def fast(argv: Sequence[str]) -> int | None:
         answer = send(path, reason)
     except (OSError, ValueError):
         return None  # the node is gone: join the bus instead
-    for text in answer.get("lines", []):  # type: ignore[union-attr]
+    lines = answer.get("lines", [])
+    for text in lines if isinstance(lines, list) else []:
         print(text)
     if not answer.get("confirmed"):
         print("mesp: error: the e-stop was not confirmed by every node; use the cell's "

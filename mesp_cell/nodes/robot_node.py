@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 
 from mesp_cell.drivers.extruder_plant import PlantParams
-from mesp_cell.drivers.robot_base import RobotDriver, RobotLinkError, ServoConfig
+from mesp_cell.drivers.robot_base import RobotLinkError, ServoConfig
 from mesp_cell.drivers.screw_stop import ScrewStop
 from mesp_cell.drivers.stream import ServoStream, StreamPlan, StreamResult
 from mesp_cell.messages import (
@@ -57,59 +57,12 @@ from mesp_cell.nodes.flow_sync import FLOW_INTERVAL_S, FlowSync
 from mesp_cell.nodes.interlock import Interlock, MustRun
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from mesp_cell.nodes.print_ledger import Ledger
-from planner.cell import CellConfig, load_cell
+from mesp_cell.nodes.robot_driver import cell_of, home_and_tool, make_driver
 from slicer.errors import InputError
 
 END = "\x00end"  # guard reason that ends a stream at its ``end`` sample (not a stop)
 
 log = logging.getLogger("mesp.robot")
-
-
-def cell_of(params: dict[str, Any]) -> CellConfig:
-    """The cell description of this robot: ``params['cell_file']`` ("" = the bundled cell)."""
-    cell = cell_file_of(params)
-    return load_cell(Path(cell) if cell else None)
-
-
-def home_and_tool(params: dict[str, Any], cell: CellConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Home (6,) rad and tool (4, 4) mm: the cell's, unless the launch file overrides them
-    (``home_deg``, ``tool_T``)."""
-    home = np.radians(params.get("home_deg", cell.robot.home_deg))
-    tool = params.get("tool_T")
-    tool_T = cell.tool.tool_T if tool is None else np.asarray(tool, dtype=np.float64)
-    return home, tool_T
-
-
-def make_driver(params: dict[str, Any], servo: ServoConfig,
-                cell: CellConfig | None = None) -> RobotDriver:
-    """The driver named by ``params['backend']``: "twin" (default), "mujoco" or "ur5e"."""
-    backend = params.get("backend", "twin")
-    home, tool_T = home_and_tool(params, cell if cell is not None else cell_of(params))
-    if backend in ("twin", "mujoco"):
-        from mesp_cell.drivers.sim_clock import SimClock
-
-        # the simulated cell's clock, shared with the emulated extruder ("" = private)
-        clock = SimClock(servo.time_scale, params.get("sim_clock") or None)
-    if backend == "twin":
-        from mesp_cell.drivers.robot_twin import KinematicTwin
-
-        return KinematicTwin(servo, q0=home, tool_T=tool_T, clock=clock)
-    if backend == "mujoco":
-        from mesp_cell.drivers.robot_twin import mujoco_twin
-
-        return mujoco_twin(servo, q0=home, tool_T=tool_T, cell_file=cell_file_of(params),
-                           clock=clock)
-    if backend == "ur5e":
-        from mesp_cell.drivers.ur5e_rtde import UR5eRTDE
-
-        return UR5eRTDE(str(params["host"]), servo, tool_T=tool_T)
-    raise ValueError(f"unknown robot backend '{backend}' (twin, mujoco, ur5e)")
-
-
-def cell_file_of(params: dict[str, Any]) -> str | None:
-    """The cell file of the MuJoCo backend (None = the bundled cell)."""
-    cell = params.get("cell_file")
-    return str(cell) if cell else None
 
 
 class RobotNode(LifecycleNode):
