@@ -1,7 +1,8 @@
 """The robot node's interlocks: asked before every servo sample of a stream.
 
 A stream goes on only while there is no e-stop, the extruder and supervisor processes are on
-the bus, and, wherever the trajectory deposits, the extruder reports fresh (``fresh_s``), with
+the bus, the extruder reports no fault (travel included), and, wherever the trajectory
+deposits, the extruder reports fresh (``fresh_s``), with
 no fault, running, and delivering what it is commanded (``FlowCheck``). ``MustRun`` says at
 which samples the extruder must already be running: the robot node switches it ``lead_n``
 samples ahead of each change of deposition, and a switch-on needs ``margin_n`` samples to show.
@@ -137,6 +138,11 @@ class Interlock:
             why = self.presence_reason()
             if why:
                 return why
-            return self.extruder_reason() if must(k) else ""
+            if must(k):
+                return self.extruder_reason()
+            ext = self.ext  # a faulted extruder stops travel moves too, at once
+            if ext is not None and ext.fault and time.monotonic() - self.ext_t <= self.fresh_s:
+                return f"extruder fault {ext.fault:#x}: {ext.detail}"
+            return ""
 
         return check
