@@ -209,7 +209,11 @@ class Campaign:
         try:
             t = self.inject(fault)
             time.sleep(1.5)
-            run.screw_stop_s = watch.stopped_after(t)
+            if fault in ("modbus-stop", "modbus-freeze"):  # nothing reads the screw then
+                run.notes.append("screw not observable while the link is down (the "
+                                 "controller's watchdog stops it)")
+            else:
+                run.screw_stop_s = watch.stopped_after(t)
             if not watch.running_at(t):
                 run.notes.append("screw was off at the fault")
         finally:
@@ -380,6 +384,8 @@ def table(runs: list[Run]) -> str:
         stops = fault in STOPS  # the others must not stop the print: no stop times
         arm = _ms([r.motion_stop_s for r in rs]) if stops else "prints on"
         screw = _ms([r.screw_stop_s for r in rs]) if stops else "prints on"
+        if fault in ("modbus-stop", "modbus-freeze"):
+            screw = "link down: watchdog"
         rows.append(
             f"| {fault} | {len(rs)} | {arm} | {screw} | {sum(r.resumed for r in rs)} | "
             f"{sum(r.state == 'done' for r in rs)} | {sum(max(r.lost, 0) for r in rs)} | "

@@ -510,6 +510,23 @@ class SupervisorNode(LifecycleNode):
         if last is not None:
             self.store.checkpoint(job_id, last.layer, last.waypoint, last.sample)
 
+    def _lost_end(self, job_id: str, asked: float) -> StreamEvent | None:
+        """The end of ``job_id``'s stream if its event was lost on the bus: the robot's state
+        shows it not streaming well after the stream was asked for (``asked``, s since the
+        epoch); its ``status`` then says how it ended."""
+        rs = self.robot_state
+        if (rs is None or rs.t < asked + 1.0 or rs.job_id != job_id
+                or rs.mode not in ("idle", "stopped")):
+            return None
+        reply = self._request(self.names["robot"], Command.make("status"), 1.0)
+        if not reply.ok or reply.value("mode") not in ("idle", "stopped"):
+            return None
+        log.warning("the end of the stream of %s did not arrive; the robot is %s", job_id,
+                    reply.value("mode"))
+        why = str(reply.value("stop_reason", ""))
+        return StreamEvent(job_id, "done" if reply.value("mode") == "idle" else "stopped",
+                           why, rs.sample, float(reply.value("stop_t", time.time())))
+
     def _monitor(self, job: JobRecord, plan: StreamPlan, ext0: float) -> StreamEvent:
         """Follow the stream (checkpoints, progress) until it ends. The robot node switches
         the extruder on the servo clock."""
@@ -519,9 +536,13 @@ class SupervisorNode(LifecycleNode):
         eta_of = EtaEstimate(self.time_scale / self.dt)
         layer = max(job.layer, 0)
         wp_last = job.waypoint
+        asked = time.time()
         while True:
             if self.names["robot"] not in self.alive:
                 raise Stopped(f"{self.names['robot']} process lost")
+            lost = self._lost_end(job.id, asked)
+            if lost is not None:
+                return lost
             if self.names["extruder"] not in self.alive:
                 self._request(self.names["robot"], Command.make("stop", reason="extruder lost"),
                               1.0)
