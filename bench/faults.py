@@ -295,6 +295,9 @@ class Campaign:
         if fault.startswith("kill-"):
             if not self.launch.wait_alive(fault[5:], 60.0):
                 raise RuntimeError(f"{fault[5:]} was not restarted")
+            # the killed process's presence may be withdrawn after its successor's appeared
+            # (zenoh liveliness), which nodes then take for the successor leaving
+            time.sleep(2.0)
         elif fault == "estop":
             bad = self.client.reset_estop()
             if bad:

@@ -170,6 +170,14 @@ class RobotNode(LifecycleNode):
         self.interlock.alive.discard(node)
         if node in (self.extruder_name, self.supervisor_name):
             self._halt(f"{node} process lost")
+            # A killed process's token may be withdrawn after its restarted successor's
+            # appeared: ask the bus again, so the successor is not taken for gone.
+            self.spawn(lambda: self._recheck(node), f"recheck-{node}")
+
+    def _recheck(self, node: str) -> None:
+        time.sleep(0.3)
+        if self.bus is not None and node in self.bus.alive_nodes(1.0):
+            self.interlock.alive.add(node)
 
     def _on_estop(self, msg: EStop) -> None:
         self.interlock.latch_estop(f"e-stop from {msg.source}"
