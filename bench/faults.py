@@ -358,6 +358,7 @@ def campaign(faults: list[str], runs: int, time_scale: float, backend: str, seed
                     r = c.run(fault, rng)
                 except RuntimeError as exc:  # the run could not be made (counted as such)
                     r = Run(fault, state="not run", reason=str(exc))
+                if r.state != "done":
                     c.clear()
                 on_run(r)
                 out.append(r)

@@ -34,6 +34,9 @@ class PrintCheck:
         missing: waypoints never reported. doubled: extra reports plus printed waypoints a
             later stream went over again.
         part_mm3: ink for the part (totaliser less ink at rest), mm^3. toolpath_mm3: mm^3.
+        stop_mm3: mm^3 the ink around the stops is uncertain by: per resumed stop, the ink of
+            the screw's lead (the set-point x ``lead_s``; where in it the screw stopped is
+            known to the servo sample, when it stopped to the bus and Modbus latency).
     """
 
     expected: int
@@ -42,6 +45,7 @@ class PrintCheck:
     doubled: int
     part_mm3: float
     toolpath_mm3: float
+    stop_mm3: float = 0.0
 
     @property
     def volume_error(self) -> float:
@@ -51,7 +55,8 @@ class PrintCheck:
     @property
     def ok(self) -> bool:
         return (not self.missing and not self.doubled
-                and abs(self.volume_error) <= VOLUME_TOLERANCE)
+                and abs(self.part_mm3 - self.toolpath_mm3)
+                <= VOLUME_TOLERANCE * self.toolpath_mm3 + self.stop_mm3)
 
     @property
     def reason(self) -> str:
@@ -64,7 +69,7 @@ class PrintCheck:
         if not self.ok:
             return (f"the part got {self.part_mm3:.1f} mm^3 of ink, the toolpath needs "
                     f"{self.toolpath_mm3:.1f} mm^3 ({100 * self.volume_error:+.1f} %, more than "
-                    f"{100 * VOLUME_TOLERANCE:.0f} %)")
+                    f"{100 * VOLUME_TOLERANCE:.0f} % + {self.stop_mm3:.1f} mm^3 for its stops)")
         return ""
 
     @property
@@ -79,16 +84,18 @@ class PrintCheck:
         return {"waypoints_expected": self.expected, "waypoints_printed": self.printed,
                 "waypoints_missing": self.missing, "waypoints_doubled": self.doubled,
                 "part_volume_mm3": self.part_mm3, "toolpath_volume_mm3": self.toolpath_mm3,
+                "stop_allowance_mm3": self.stop_mm3,
                 "volume_error": self.volume_error}
 
 
-def check_print(job_dir: Path, plan: StreamPlan, volume_mm3: float,
-                rest_mm3: float) -> PrintCheck:
+def check_print(job_dir: Path, plan: StreamPlan, volume_mm3: float, rest_mm3: float,
+                lead_mm3: float = 0.0) -> PrintCheck:
     """The verdict on ``job_dir``'s print: ``volume_mm3`` extruded in all, ``rest_mm3`` of it
-    with the nozzle at rest."""
+    with the nozzle at rest; ``lead_mm3``: the set-point's ink over the screw's lead."""
     printed = print_ledger.read(job_dir)
     expected = plan.wp_id[np.asarray(plan.wp_extrude, dtype=bool)]
+    resumes = int(np.count_nonzero(printed.streams[:, 1] >= 0)) if printed.streams.size else 0
     return PrintCheck(int(expected.size), int(printed.waypoints.size),
                       int(printed.missing(expected).size),
                       printed.doubled + printed.restreamed(),
-                      volume_mm3 - rest_mm3, planned_ink(Path(job_dir)))
+                      volume_mm3 - rest_mm3, planned_ink(Path(job_dir)), resumes * lead_mm3)

@@ -397,7 +397,8 @@ class SupervisorNode(LifecycleNode):
             self._move(job.id, to="home")
             volume = self._volume(job, ext0)
             self.store.progress(job.id, 100.0, 0.0, volume)
-            check = check_print(Path(job.dir), plan, volume, self._rest_ink(job))
+            check = check_print(Path(job.dir), plan, volume, self._rest_ink(job),
+                                self.setpoint * self.true_per_nominal * self.lead_s)
             update_report(Path(job.dir), {"print": {
                 "cell": self.cell, "volume_mm3": volume, **check.report(),
                 "profile": {"name": profile.name, "sha256": profile.sha256,
