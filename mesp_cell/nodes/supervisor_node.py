@@ -366,6 +366,10 @@ class SupervisorNode(LifecycleNode):
             # axis, above it, and into it along the target sample's axis (sample 0 is home)
             self._move(job.id, to="sample", sample=start)
             first = plan.first_extruding()
+            # a fault the controller latched (a watchdog left by a lost link or a killed
+            # extruder node) is acknowledged before anything streams: the robot stops even a
+            # travel move on an extruder fault
+            self._extruder("clear")
             if start < first:
                 # the planned entry (home -> plunge to the first waypoint) deposits nothing:
                 # stream it, then lead and prime at rest at the first deposition sample
@@ -466,7 +470,6 @@ class SupervisorNode(LifecycleNode):
         finally:
             self._drain(job.id)
             self._checkpoint(job, plan)
-            self._settle_screw()
             self.store.progress(job.id, self.store.get(job.id).percent, 0.0,
                                 self._volume(job, ext0))
             req = self.request
@@ -478,6 +481,10 @@ class SupervisorNode(LifecycleNode):
             else:
                 self.store.transition(job.id, "interrupted", reason)
             log.warning("job %s stopped: %s", job.id, reason)
+            # the screw delivers a little more after the stop: counted before the job goes on
+            self._settle_screw()
+            self.store.progress(job.id, self.store.get(job.id).percent, 0.0,
+                                self._volume(job, ext0))
 
     def _settle_screw(self, timeout: float = 5.0) -> None:
         """Wait until a fresh extruder state shows the screw at rest: it keeps delivering
