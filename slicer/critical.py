@@ -9,8 +9,8 @@ selector's cone (design.md, ``--critical``). The slicing field is constant on ea
 * otherwise it is a *start* surface (e.g. a bottom): growth = -outward normal (into the part).
 
 Regions that touch share one value of the field (one layer lies on both). A start and an end
-surface that touch (a thin sheet whose top and bottom faces meet at a sharp edge, the rim of
-an ear) would make the layers grow out of one and end on the other at the same value: they
+surface that touch at a sharp edge (a thin sheet whose top and bottom faces meet, the rim of an
+ear: mean outward normals more than 90 deg apart) would make the layers grow out of one and end on the other at the same value: they
 fold back between the two, and their printing directions point downward. The smaller of such
 a pair is dropped before the field is built, with a note naming it (``resolve_folds``).
 """
@@ -24,6 +24,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
+from core.tolerance import tol
 from slicer.config import CriticalSelector
 from slicer.operators import TetOperators
 
@@ -95,10 +96,11 @@ def _edge_connected_patches(faces: np.ndarray) -> np.ndarray:
 
 def resolve_folds(regions: Sequence[CriticalRegion], vertices: np.ndarray
                   ) -> tuple[tuple[CriticalRegion, ...], tuple[str, ...]]:
-    """The regions without those that touch a larger region of the other kind (start vs end).
+    """The regions without those that touch a larger region of the other kind (start vs end)
+    at a sharp edge.
 
     Largest first, a region is kept unless it shares a vertex with a kept region of the
-    opposite sign; each dropped one gets a note naming it (selector, area, centre) and the
+    opposite sign whose mean outward normal lies more than 90 deg from its own; each dropped one gets a note naming it (selector, area, centre) and the
     region it touches.
 
     Args:
@@ -114,10 +116,13 @@ def resolve_folds(regions: Sequence[CriticalRegion], vertices: np.ndarray
     notes: list[str] = []
     for k in sorted(range(len(regions)), key=lambda i: -regions[i].area):  # over regions
         r = regions[k]
-        touching = owner_of[-r.sign][r.vertices]
-        touching = touching[touching >= 0]
-        if len(touching):
-            other = regions[int(touching[0])]
+        touching = np.unique(owner_of[-r.sign][r.vertices])
+        # a fold only where the two surfaces meet at an edge sharper than a right angle (their
+        # mean outward normals more than 90 deg apart): a bottom and a side share a layer
+        opposed = [int(t) for t in touching[touching >= 0]
+                   if float(_mean_normal(regions[int(t)]) @ _mean_normal(r)) < -tol.slack]
+        if opposed:
+            other = regions[opposed[0]]
             there = _where(other, vertices)
             notes.append(
                 f"critical region of '{r.selector}' ({_where(r, vertices)}) dropped: it touches "
@@ -128,6 +133,12 @@ def resolve_folds(regions: Sequence[CriticalRegion], vertices: np.ndarray
         keep[k] = True
         owner_of[r.sign][r.vertices] = k
     return tuple(r for r, kept in zip(regions, keep, strict=True) if kept), tuple(notes)
+
+
+def _mean_normal(region: CriticalRegion) -> np.ndarray:
+    """(3,) float64 unit mean outward normal of a region's faces."""
+    n = region.normals.mean(axis=0)
+    return n / max(float(np.linalg.norm(n)), tol.zero)
 
 
 def _kind(region: CriticalRegion) -> str:

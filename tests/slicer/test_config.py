@@ -93,12 +93,16 @@ def test_with_overrides_validates() -> None:
 
 def test_every_number_is_finite_and_in_its_documented_range(tmp_path: Path) -> None:
     from slicer.config import job_ranges
+    from slicer.extrusion import load_profile
 
     ranges = job_ranges()
     defaults = load_job()
     for key, (lo, hi) in ranges.items():  # the defaults lie within their ranges
         section, name = key.split(".")
-        value = getattr(getattr(defaults, section), name)
+        # [profile]: the rates of an extrusion profile, checked on the job's default profile
+        owner = (load_profile(defaults.extrusion.profile) if section == "profile"
+                 else getattr(defaults, section))
+        value = getattr(owner, name)
         if isinstance(value, int | float):
             assert lo <= value <= hi, key
     job = tmp_path / "job.toml"
