@@ -167,7 +167,9 @@ class SupervisorNode(LifecycleNode):
             return Reply.done(state=job.state)
         if cmd.verb in ("pause", "abort"):
             with self._lock:
-                if self.current == job.id:
+                # still printing: the print loop stops it (a job already paused while the loop
+                # waits for its screw to settle is aborted below, like any paused job)
+                if self.current == job.id and self.store.get(job.id).state == "printing":
                     self.request = cmd.verb
                     self._request(self.names["robot"], Command.make("stop", reason=cmd.verb), 2.0)
                     return Reply.done()
