@@ -49,6 +49,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `mesp` console script."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["estop"]:  # the stop must not wait for every command to be imported
+        from mesp_cell.commands.estop import fast
+
+        code = fast(argv[1:])
+        if code is not None:
+            return code
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

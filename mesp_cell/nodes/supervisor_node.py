@@ -9,7 +9,11 @@ sample, prime and start extrusion ``lead_s`` ahead of deposition
 switches the extruder ``lead_s`` ahead of every change of ``extrude``, on the servo clock),
 record a checkpoint at every deposited waypoint, publish progress, stop the extruder, park.
 A stream that stops early (node lost, fault, e-stop) leaves the job ``interrupted`` with its
-checkpoint; ``resume`` restarts from it. A fresh print waits in ``ready_check`` until the
+checkpoint; ``resume`` restarts right after the last waypoint the robot's ledger holds (what it
+printed, ``print_ledger``), whatever the supervisor saw before it was killed. A job is done only
+when the ledger holds every deposition waypoint exactly once and the ink extruded for the part
+is the toolpath's within ``VOLUME_TOLERANCE`` (``print_check``); otherwise it fails with why.
+A fresh print waits in ``ready_check`` until the
 operator confirms the tank (``ready``); an abort retracts the nozzle along its axis and goes
 home on the robot's checked safe path. Commands (``supervisor/cmd``): ``pause``, ``resume``,
 ``abort``, ``ready`` (job_id); ``resume`` and ``ready`` are refused while an e-stop is latched.
@@ -30,8 +34,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from core.errors import InputError
-from core.report import update_report
+from core.report import read_report, update_report
 from mesp_cell.drivers.stream import StreamPlan, sha256_of
 from mesp_cell.jobs import JobRecord, JobStore
 from mesp_cell.messages import (
@@ -44,7 +50,9 @@ from mesp_cell.messages import (
     StreamEvent,
     WaypointReached,
 )
+from mesp_cell.nodes import print_ledger
 from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
+from mesp_cell.nodes.print_check import check_print
 from mesp_cell.profiles import stale_reason
 from mesp_cell.step_timeouts import plan_timeout, slice_timeout
 from slicer.extrusion import ExtrusionProfile, load_job_profile
@@ -159,7 +167,9 @@ class SupervisorNode(LifecycleNode):
             return Reply.done(state=job.state)
         if cmd.verb in ("pause", "abort"):
             with self._lock:
-                if self.current == job.id:
+                # still printing: the print loop stops it (a job already paused while the loop
+                # waits for its screw to settle is aborted below, like any paused job)
+                if self.current == job.id and self.store.get(job.id).state == "printing":
                     self.request = cmd.verb
                     self._request(self.names["robot"], Command.make("stop", reason=cmd.verb), 2.0)
                     return Reply.done()
@@ -333,12 +343,18 @@ class SupervisorNode(LifecycleNode):
         plan = StreamPlan.load(traj, self.dt)
         digest = sha256_of(traj)
         robot = self.names["robot"]
-        reply = self._request(robot, Command.make("load", job.id, path=str(traj), sha256=digest))
+        reply = self._request(robot, Command.make("load", job.id, path=str(traj), sha256=digest,
+                                                  fresh=not resume))
         if not reply.ok:
             raise InputError(f"pre-flight: {reply.reason}", "fix the job and re-submit it")
         self.store.set_sizes(job.id, plan.layers, int(plan.wp_id.size), plan.samples)
-        start = max(job.sample, 0) if resume else 0
-        after = job.waypoint if resume else -1
+        start, after = 0, -1
+        if resume:  # right after the last waypoint the robot printed
+            after, start = self._checkpoint(job, plan)
+            start = max(start, 0)
+            if after >= 0:  # re-traced up to the stop, and the screw's lead past it
+                stop = print_ledger.read(Path(job.dir)).stop
+                self._add_rest_ink(job, self._deposition_s(plan, start, max(stop, start)))
         with self._lock:
             self.current, self.request = job.id, ""
         while not self.events.empty():
@@ -352,6 +368,10 @@ class SupervisorNode(LifecycleNode):
             # axis, above it, and into it along the target sample's axis (sample 0 is home)
             self._move(job.id, to="sample", sample=start)
             first = plan.first_extruding()
+            # a fault the controller latched (a watchdog left by a lost link or a killed
+            # extruder node) is acknowledged before anything streams: the robot stops even a
+            # travel move on an extruder fault
+            self._extruder("clear")
             if start < first:
                 # the planned entry (home -> plunge to the first waypoint) deposits nothing:
                 # stream it, then lead and prime at rest at the first deposition sample
@@ -370,7 +390,10 @@ class SupervisorNode(LifecycleNode):
                 # Lead and prime run on the extruder's (the twin's) clock; the switch-on must
                 # also show in the extruder state (wall-clock latency) before the stream starts.
                 wait = (self.lead_s + (0.0 if resume else self.prime_s)) / self.time_scale
+                t_on = time.monotonic()
                 time.sleep(max(wait, min(self.lead_s, self.settle_s)))
+                self._add_rest_ink(job, (time.monotonic() - t_on) * self.time_scale
+                                   - self._deposition_s(plan, start - 1))
             ev = self._stream(job, plan, ext0, start, after)
             if ev.kind == "done":
                 self._extruder("stop")
@@ -380,15 +403,19 @@ class SupervisorNode(LifecycleNode):
             self._move(job.id, to="home")
             volume = self._volume(job, ext0)
             self.store.progress(job.id, 100.0, 0.0, volume)
+            check = check_print(Path(job.dir), plan, volume, self._rest_ink(job),
+                                self.setpoint * self.true_per_nominal * self.lead_s)
             update_report(Path(job.dir), {"print": {
-                "cell": self.cell, "volume_mm3": volume,
+                "cell": self.cell, "volume_mm3": volume, **check.report(),
                 "profile": {"name": profile.name, "sha256": profile.sha256,
                             "rate_mm3_s": profile.rate_mm3_s,
                             "setpoint_mm3_s": profile.setpoint_mm3_s,
                             "calibrated": profile.calibrated}}})
+            if not check.ok:
+                raise InputError(check.reason, check.fix)
             self.store.transition(job.id, "done")
         except Stopped as exc:
-            self._stopped(job, str(exc), ext0)
+            self._stopped(job, plan, str(exc), ext0)
         finally:
             with self._lock:
                 self.current, self.request = "", ""
@@ -406,12 +433,45 @@ class SupervisorNode(LifecycleNode):
             raise Stopped(reply.reason)
         return self._monitor(job, plan, ext0)
 
-    def _stopped(self, job: JobRecord, reason: str, ext0: float) -> None:
+    def _checkpoint(self, job: JobRecord, plan: StreamPlan) -> tuple[int, int]:
+        """(waypoint, sample) the robot's ledger last printed (-1, -1: nothing yet), recorded
+        as the job's checkpoint."""
+        waypoint, sample = print_ledger.read(Path(job.dir)).last
+        if waypoint >= 0:
+            i = int(np.searchsorted(plan.wp_id, waypoint))
+            self.store.checkpoint(job.id, int(plan.wp_layer[i]), waypoint, sample)
+        return waypoint, sample
+
+    def _rest_ink(self, job: JobRecord) -> float:
+        """mm^3 of the job's ink that is not the toolpath's, so far. The screw runs ``lead_s``
+        ahead of the arm, so a stream's screw time is its deposition time plus the time it
+        ran at rest before the stream (purge, lead), less the deposition in the lead after
+        its first sample (the lead paid back), plus, when it stops early, the deposition in
+        the lead after the stop; a resume re-traces from the last printed waypoint to the
+        stop. Each is counted here (``_add_rest_ink``) as it happens."""
+        return float(read_report(Path(job.dir)).get("ink_at_rest", {}).get("mm3", 0.0))
+
+    def _add_rest_ink(self, job: JobRecord, seconds: float) -> None:
+        """Add ``seconds`` of the extruder's clock at the set-point to the job's ink not for
+        the toolpath (``_rest_ink``)."""
+        ink = self.setpoint * self.true_per_nominal * seconds
+        update_report(Path(job.dir), {"ink_at_rest": {"mm3": self._rest_ink(job) + ink}})
+
+    def _deposition_s(self, plan: StreamPlan, k: int, stop: int | None = None) -> float:
+        """s of deposition after servo sample ``k`` up to ``lead_s`` past ``stop`` (default
+        ``k``): the screw runs that far ahead of the arm (the robot switches it ``lead_s``
+        ahead)."""
+        last = k if stop is None else stop
+        idx = np.arange(k + 1, min(last + 1 + round(self.lead_s / self.dt), plan.samples))
+        return float(np.count_nonzero(plan.extrude[idx])) * self.dt if idx.size else 0.0
+
+    def _stopped(self, job: JobRecord, plan: StreamPlan, reason: str, ext0: float) -> None:
         try:
             self._request(self.names["extruder"], Command.make("stop"), 1.0)
             self._request(self.names["robot"], Command.make("stop", reason=reason), 1.0)
         finally:
             self._drain(job.id)
+            self._checkpoint(job, plan)
             self.store.progress(job.id, self.store.get(job.id).percent, 0.0,
                                 self._volume(job, ext0))
             req = self.request
@@ -423,6 +483,25 @@ class SupervisorNode(LifecycleNode):
             else:
                 self.store.transition(job.id, "interrupted", reason)
             log.warning("job %s stopped: %s", job.id, reason)
+            # the screw delivers a little more after the stop: counted before the job goes on
+            self._settle_screw()
+            self.store.progress(job.id, self.store.get(job.id).percent, 0.0,
+                                self._volume(job, ext0))
+
+    def _settle_screw(self, timeout: float = 5.0) -> None:
+        """Wait until a fresh extruder state shows the screw at rest: it keeps delivering
+        (its flow response) after a stop, and a killed extruder node comes back within the
+        timeout; the job's volume then holds that ink too."""
+        asked = time.time()
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            ext = self.extruder_state
+            if (ext is not None and ext.t > asked and ext.connected and not ext.running
+                    and abs(ext.rate) <= 0.01 * max(self.setpoint, 1e-9)):
+                return
+            time.sleep(0.02)
+        log.warning("the screw did not show at rest within %g s; the job's volume may miss "
+                    "its last ink", timeout)
 
     def _volume(self, job: JobRecord, ext0: float) -> float:
         """mm^3 extruded: the controller's totaliser (nominal) times the profile's C per
@@ -441,6 +520,23 @@ class SupervisorNode(LifecycleNode):
         if last is not None:
             self.store.checkpoint(job_id, last.layer, last.waypoint, last.sample)
 
+    def _lost_end(self, job_id: str, asked: float) -> StreamEvent | None:
+        """The end of ``job_id``'s stream if its event was lost on the bus: the robot's state
+        shows it not streaming well after the stream was asked for (``asked``, s since the
+        epoch); its ``status`` then says how it ended."""
+        rs = self.robot_state
+        if (rs is None or rs.t < asked + 1.0 or rs.job_id != job_id
+                or rs.mode not in ("idle", "stopped")):
+            return None
+        reply = self._request(self.names["robot"], Command.make("status"), 1.0)
+        if not reply.ok or reply.value("mode") not in ("idle", "stopped"):
+            return None
+        log.warning("the end of the stream of %s did not arrive; the robot is %s", job_id,
+                    reply.value("mode"))
+        why = str(reply.value("stop_reason", ""))
+        return StreamEvent(job_id, "done" if reply.value("mode") == "idle" else "stopped",
+                           why, rs.sample, float(reply.value("stop_t", time.time())))
+
     def _monitor(self, job: JobRecord, plan: StreamPlan, ext0: float) -> StreamEvent:
         """Follow the stream (checkpoints, progress) until it ends. The robot node switches
         the extruder on the servo clock."""
@@ -450,9 +546,13 @@ class SupervisorNode(LifecycleNode):
         eta_of = EtaEstimate(self.time_scale / self.dt)
         layer = max(job.layer, 0)
         wp_last = job.waypoint
+        asked = time.time()
         while True:
             if self.names["robot"] not in self.alive:
                 raise Stopped(f"{self.names['robot']} process lost")
+            lost = self._lost_end(job.id, asked)
+            if lost is not None:
+                return lost
             if self.names["extruder"] not in self.alive:
                 self._request(self.names["robot"], Command.make("stop", reason="extruder lost"),
                               1.0)
