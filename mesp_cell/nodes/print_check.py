@@ -4,8 +4,9 @@ A stream that reached its last sample is not yet a finished part: a resume may h
 repeated waypoints, and an extruder may have turned without delivering. ``check_print`` reads
 the robot's ledger (``print_ledger``: the deposition waypoints it passed, in order) and the ink
 the totaliser counted for the part (total, less the ink extruded with the nozzle at rest: the
-purge and the resume leads) and compares them with the trajectory's deposition waypoints and
-the toolpath's volume (``planned_ink``).
+purge and the resume leads, and on a fast twin the ink its extruder switches' wall-clock
+latency moved in simulated time, ``extruder_switch``) and compares them with the trajectory's
+deposition waypoints and the toolpath's volume (``planned_ink``).
 """
 
 from __future__ import annotations
@@ -37,6 +38,8 @@ class PrintCheck:
         stop_mm3: mm^3 the ink around the stops is uncertain by: per resumed stop, the ink of
             the screw's lead (the set-point x ``lead_s``; where in it the screw stopped is
             known to the servo sample, when it stopped to the bus and Modbus latency).
+        switch_mm3: mm^3 a fast twin's switch latency moved beyond real time, taken off the
+            totaliser's ink to give ``part_mm3`` (0 on the real cell).
     """
 
     expected: int
@@ -46,6 +49,7 @@ class PrintCheck:
     part_mm3: float
     toolpath_mm3: float
     stop_mm3: float = 0.0
+    switch_mm3: float = 0.0
 
     @property
     def volume_error(self) -> float:
@@ -85,17 +89,21 @@ class PrintCheck:
                 "waypoints_missing": self.missing, "waypoints_doubled": self.doubled,
                 "part_volume_mm3": self.part_mm3, "toolpath_volume_mm3": self.toolpath_mm3,
                 "stop_allowance_mm3": self.stop_mm3,
+                "switch_latency_mm3": self.switch_mm3,
                 "volume_error": self.volume_error}
 
 
 def check_print(job_dir: Path, plan: StreamPlan, volume_mm3: float, rest_mm3: float,
-                lead_mm3: float = 0.0) -> PrintCheck:
+                lead_mm3: float = 0.0, true_per_nominal: float = 1.0) -> PrintCheck:
     """The verdict on ``job_dir``'s print: ``volume_mm3`` extruded in all, ``rest_mm3`` of it
-    with the nozzle at rest; ``lead_mm3``: the set-point's ink over the screw's lead."""
+    with the nozzle at rest; ``lead_mm3``: the set-point's ink over the screw's lead;
+    ``true_per_nominal``: mm^3 delivered per nominal mm^3 of the totaliser (the profile's)."""
     printed = print_ledger.read(job_dir)
     expected = plan.wp_id[np.asarray(plan.wp_extrude, dtype=bool)]
     resumes = int(np.count_nonzero(printed.streams[:, 1] >= 0)) if printed.streams.size else 0
+    switch_mm3 = printed.switch_mm3 * true_per_nominal
     return PrintCheck(int(expected.size), int(printed.waypoints.size),
                       int(printed.missing(expected).size),
                       printed.doubled + printed.restreamed(),
-                      volume_mm3 - rest_mm3, planned_ink(Path(job_dir)), resumes * lead_mm3)
+                      volume_mm3 - rest_mm3 - switch_mm3, planned_ink(Path(job_dir)),
+                      resumes * lead_mm3, switch_mm3)

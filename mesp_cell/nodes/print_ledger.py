@@ -4,7 +4,9 @@ The robot node appends one record when a stream starts and one for every deposit
 its servo loop passes, before it publishes the waypoint on the bus. The file outlives every
 process (a killed supervisor, robot or a whole cell): the supervisor resumes right after the
 ledger's last waypoint, and a job is done only when the ledger holds every deposition waypoint
-exactly once. A record is 3 little-endian int64 written with one ``write`` on an
+exactly once. The robot's extruder switches on a fast twin add what their latency cost in
+simulated time (``extruder_switch``). A record is 3 little-endian int64 written with one
+``write`` on an
 ``O_APPEND`` descriptor (a killed process leaves whole records; a torn tail is ignored).
 """
 
@@ -17,9 +19,11 @@ from pathlib import Path
 import numpy as np
 
 NAME = "printed.ledger"
-# record kinds: (WAYPOINT, id, sample), (STREAM, start, after), (STOP, last sample sent, 0)
-WAYPOINT, STREAM, STOP = 0, 1, 2
+# record kinds: (WAYPOINT, id, sample), (STREAM, start, after), (STOP, last sample sent, 0),
+# (SWITCH, excess ink in NANO mm^3, latency in NANO s)
+WAYPOINT, STREAM, STOP, SWITCH = 0, 1, 2, 3
 RECORD = np.dtype("<i8")
+NANO = 1e-9  # unit of the SWITCH record's values
 
 
 @dataclass(frozen=True)
@@ -33,6 +37,9 @@ class Printed:
         stream_at: (s,) int64, waypoints printed before each stream began.
         stop: the last sample the last stream sent if it stopped early and its process lived
             to say so (-1 otherwise).
+        switch_mm3: nominal mm^3 the extruder switches' latency moved on a fast twin beyond
+            real time (``extruder_switch``; 0 on the real cell).
+        switches: switches recorded.
     """
 
     waypoints: np.ndarray
@@ -40,6 +47,8 @@ class Printed:
     streams: np.ndarray
     stream_at: np.ndarray
     stop: int = -1
+    switch_mm3: float = 0.0
+    switches: int = 0
 
     @property
     def last(self) -> tuple[int, int]:
@@ -69,13 +78,17 @@ def read(job_dir: Path) -> Printed:
     path = Path(job_dir) / NAME
     raw = np.fromfile(path, dtype=RECORD) if path.is_file() else np.zeros(0, RECORD)
     rec = raw[: raw.size - raw.size % 3].reshape(-1, 3)
+    sw = rec[:, 0] == SWITCH
+    excess = float(rec[sw, 1].sum()) * NANO
+    rec = rec[~sw]
     wp = rec[:, 0] == WAYPOINT
     st = rec[:, 0] == STREAM
     before = np.concatenate([[0], np.cumsum(wp)])[np.flatnonzero(st)].astype(np.int64)
     stop = -1
     if rec.size and rec[-1, 0] == STOP:
         stop = int(rec[-1, 1])
-    return Printed(rec[wp, 1].copy(), rec[wp, 2].copy(), rec[st, 1:].copy(), before, stop)
+    return Printed(rec[wp, 1].copy(), rec[wp, 2].copy(), rec[st, 1:].copy(), before, stop,
+                   excess, int(np.count_nonzero(sw)))
 
 
 class Ledger:
@@ -98,6 +111,11 @@ class Ledger:
     def stopped(self, last_sample: int) -> None:
         """The stream stopped early after sending ``last_sample``."""
         self._write(STOP, last_sample, 0)
+
+    def switch(self, excess_mm3: float, latency_s: float) -> None:
+        """An extruder switch ``latency_s`` late moved ``excess_mm3`` (nominal) beyond real
+        time."""
+        self._write(SWITCH, round(excess_mm3 / NANO), round(latency_s / NANO))
 
     def close(self) -> None:
         os.close(self.fd)

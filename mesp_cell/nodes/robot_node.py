@@ -30,7 +30,6 @@ starts an empty ledger (a new print).
 from __future__ import annotations
 
 import logging
-import queue
 import threading
 import time
 from collections.abc import Sequence
@@ -54,6 +53,7 @@ from mesp_cell.messages import (
     StreamEvent,
     WaypointReached,
 )
+from mesp_cell.nodes.extruder_switch import Switcher, wall_clock
 from mesp_cell.nodes.flow_check import FlowCheck, FlowResponse
 from mesp_cell.nodes.flow_sync import FLOW_INTERVAL_S, FlowSync
 from mesp_cell.nodes.interlock import Interlock, MustRun
@@ -111,7 +111,9 @@ class RobotNode(LifecycleNode):
         if link:
             host, _, port = link.rpartition(":")
             self.screw = ScrewStop(host, int(port))
-        self._switches: queue.Queue[tuple[str, float]] = queue.Queue()
+        clock = getattr(self.driver, "clock", None)  # a twin's clock, shared with the extruder
+        self.switcher = Switcher(self._send_switch, clock.now if clock else wall_clock,
+                                 self.servo.time_scale)
         self.state_period = 1.0 / float(p.get("state_hz", 100.0))
         self.plan: StreamPlan | None = None
         self.job_id = ""
@@ -139,19 +141,14 @@ class RobotNode(LifecycleNode):
         self.bus.watch_presence(self._on_presence)
         self.bus.serve(self._on_command)
         self.spawn(self._publish_state, "state")
-        self.spawn(self._switcher, "switcher")
+        self.spawn(lambda: self.switcher.run(self.stopping), "switcher")
 
-    def _switcher(self) -> None:
-        """Send extruder switch commands off the servo thread (a request takes a few ms)."""
-        while not self.stopping.is_set():
-            try:
-                verb, rate = self._switches.get(timeout=0.2)
-            except queue.Empty:
-                continue
-            if self.bus is not None:
-                reply = self.bus.request(self.extruder_name, Command.make(verb, rate=rate), 1.0)
-                if not reply.ok:
-                    log.warning("extruder %s refused: %s", verb, reply.reason)
+    def _send_switch(self, verb: str, rate: float) -> str:
+        """Ask the extruder node to ``verb`` at ``rate``; '' when done, else why not."""
+        if self.bus is None:
+            return "no bus"
+        reply = self.bus.request(self.extruder_name, Command.make(verb, rate=rate), 1.0)
+        return "" if reply.ok else reply.reason
 
     def on_deactivate(self) -> None:
         self._halt("robot node shutting down")
@@ -196,7 +193,7 @@ class RobotNode(LifecycleNode):
         """Command the screw to zero now: on the controller directly and through the node."""
         if self.screw is not None:
             self.screw.trigger(reason)
-        self._switches.put(("stop", 0.0))
+        self.switcher.put("stop", 0.0)
 
     # -- interlocks ------------------------------------------------------------------------
     def _guard_factory(self, plan: StreamPlan, start: int, lead_s: float) -> Any:
@@ -372,21 +369,30 @@ class RobotNode(LifecycleNode):
             # switch only for samples this stream sends (the part after ``end`` comes later)
             return plan.extrude_at(min(k + lead_n, end - 1))
 
-        switched = {"on": cmd_on(start)}
+        on0 = cmd_on(start)
+        switched = {"on": on0, "rate": rate if on0 else 0.0}  # as the extruder was left
         flow = FlowSync(plan, rate, lead_n, end, self._latency_samples(FLOW_INTERVAL_S, plan),
                         start) if self.sync_flow else None
+        job_dir = self.job_dir
+
+        def switch(verb: str, new: float, sent: float) -> None:
+            self.switcher.put(verb, sent, new - switched["rate"], job_dir)
+            switched["rate"] = new
 
         def on_sample(k: int) -> None:
             # Lead compensation on the servo clock: switch lead_n samples ahead.
             on = cmd_on(k)
             if on != switched["on"]:
                 switched["on"] = on
-                self._switches.put(("start", flow.switch_on(k) if flow else rate) if on
-                                   else ("stop", rate))
+                if on:
+                    r = flow.switch_on(k) if flow else rate
+                    switch("start", r, r)
+                else:
+                    switch("stop", 0.0, rate)
             elif on and flow is not None:
                 change = flow(k)
                 if change is not None:
-                    self._switches.put(("set_rate", change))
+                    switch("set_rate", change, change)
 
         why = guard(start)
         if why:

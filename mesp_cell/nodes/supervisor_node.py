@@ -30,7 +30,7 @@ import queue
 import threading
 import time
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -385,6 +385,7 @@ class SupervisorNode(LifecycleNode):
             # extruder node); an e-stop is only cleared by the operator (`mesp estop --reset`).
             self._extruder("clear")
             on = plan.extrude_at(min(start + lead_n, plan.samples - 1))
+            t_on = -1.0
             if on:
                 self._extruder("start", rate=self.setpoint)
                 # Lead and prime run on the extruder's (the twin's) clock; the switch-on must
@@ -392,9 +393,15 @@ class SupervisorNode(LifecycleNode):
                 wait = (self.lead_s + (0.0 if resume else self.prime_s)) / self.time_scale
                 t_on = time.monotonic()
                 time.sleep(max(wait, min(self.lead_s, self.settle_s)))
-                self._add_rest_ink(job, (time.monotonic() - t_on) * self.time_scale
-                                   - self._deposition_s(plan, start - 1))
-            ev = self._stream(job, plan, ext0, start, after)
+
+            def started() -> None:
+                # the screw ran at rest from its start until the robot took the stream (the
+                # request's wall time counts time_scale times over on a fast twin's clock)
+                if t_on >= 0:
+                    self._add_rest_ink(job, (time.monotonic() - t_on) * self.time_scale
+                                       - self._deposition_s(plan, start - 1))
+
+            ev = self._stream(job, plan, ext0, start, after, started=started)
             if ev.kind == "done":
                 self._extruder("stop")
             self._drain(job.id)
@@ -404,7 +411,8 @@ class SupervisorNode(LifecycleNode):
             volume = self._volume(job, ext0)
             self.store.progress(job.id, 100.0, 0.0, volume)
             check = check_print(Path(job.dir), plan, volume, self._rest_ink(job),
-                                self.setpoint * self.true_per_nominal * self.lead_s)
+                                self.setpoint * self.true_per_nominal * self.lead_s,
+                                self.true_per_nominal)
             update_report(Path(job.dir), {"print": {
                 "cell": self.cell, "volume_mm3": volume, **check.report(),
                 "profile": {"name": profile.name, "sha256": profile.sha256,
@@ -421,8 +429,10 @@ class SupervisorNode(LifecycleNode):
                 self.current, self.request = "", ""
 
     def _stream(self, job: JobRecord, plan: StreamPlan, ext0: float, start: int, after: int,
-                end: int | None = None) -> StreamEvent:
-        """Stream samples ``start`` .. ``end`` - 1 (to the end by default) and follow it."""
+                end: int | None = None,
+                started: Callable[[], None] | None = None) -> StreamEvent:
+        """Stream samples ``start`` .. ``end`` - 1 (to the end by default) and follow it;
+        ``started`` is called as soon as the robot took the stream."""
         self._check_request()
         args: dict[str, Any] = {"start": start, "after_waypoint": after, "lead_s": self.lead_s,
                                 "rate": self.setpoint}
@@ -431,6 +441,8 @@ class SupervisorNode(LifecycleNode):
         reply = self._request(self.names["robot"], Command.make("stream", job.id, **args))
         if not reply.ok:
             raise Stopped(reply.reason)
+        if started is not None:
+            started()
         return self._monitor(job, plan, ext0)
 
     def _checkpoint(self, job: JobRecord, plan: StreamPlan) -> tuple[int, int]:
