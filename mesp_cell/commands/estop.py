@@ -1,15 +1,14 @@
 """`mesp estop`: stop every motion and extrusion of a running cell at once.
 
-The stop goes through the cell's resident e-stop node (``estop_socket``) when it runs: the
-command imports nothing but the standard library before the stop is published. Without it
-(a cell launched without the node) the command joins the bus itself, which takes seconds.
+The stop goes through the cell's resident e-stop node when it runs: ``mesp_cell.cli`` hands
+`mesp estop` to ``estop_socket.fast_estop`` before it imports anything else, so the stop is
+published after the interpreter's start-up and a Unix-socket write. Without the node (a cell
+launched without it) this command joins the bus itself, which takes seconds.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
-from collections.abc import Sequence
 
 from core.errors import InputError
 
@@ -26,37 +25,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--reset", action="store_true", help="clear a latched e-stop instead")
     p.add_argument("--on", metavar="CELL", default=None, help="name of the running cell")
     p.set_defaults(func=run)
-
-
-def fast(argv: Sequence[str]) -> int | None:
-    """`mesp estop [--reason R] [--on CELL]` through the resident e-stop node; None when it
-    cannot (other options, no node listening): then the full command runs."""
-    reason, cell = "operator", None
-    rest = list(argv)
-    while rest:
-        opt = rest.pop(0)
-        if opt in ("--reason", "--on") and rest:
-            value = rest.pop(0)
-            reason, cell = (value, cell) if opt == "--reason" else (reason, value)
-        else:
-            return None  # --reset, --help, a typo: the parser answers
-    from mesp_cell.estop_socket import send, socket_path
-
-    path = socket_path(cell)
-    if path is None:
-        return None
-    try:
-        answer = send(path, reason)
-    except (OSError, ValueError):
-        return None  # the node is gone: join the bus instead
-    lines = answer.get("lines", [])
-    for text in lines if isinstance(lines, list) else []:
-        print(text)
-    if not answer.get("confirmed"):
-        print("mesp: error: the e-stop was not confirmed by every node; use the cell's "
-              "hardware e-stop now", file=sys.stderr)
-        return 2
-    return 0
 
 
 def run(args: argparse.Namespace) -> int:

@@ -79,10 +79,14 @@ class EStopNode(LifecycleNode):
             data += chunk
         reason = str(json.loads(data.decode() or "{}").get("reason", "operator"))[:200]
         assert self.bus is not None
-        printing = tuple(j.id for j in self.store.query(self.bus_config.cell, ("printing",)))
         sent = time.time()
         self.bus.publish("estop", EStop("operator (mesp estop)", reason, sent))
         log.warning("e-stop sent: %s", reason)
+        # the jobs it stopped: printing, or interrupted since (the store is read after the
+        # publish, which waits for nothing)
+        printing = tuple(j.id for j in self.store.query(self.bus_config.cell,
+                                                        ("printing", "interrupted"))
+                         if j.state == "printing" or j.updated >= sent)
         done = confirm_estop(self.bus, self.store, self.bus_config.cell, sent, printing)
         conn.sendall(json.dumps({"sent_t": sent, "lines": done.lines(),
                                  "confirmed": done.confirmed}).encode() + b"\n")

@@ -52,3 +52,16 @@ def test_doubles_retraces_and_a_torn_tail_are_seen(tmp_path: Path) -> None:
     assert printed.restreamed() == 3
     assert Ledger(tmp_path, fresh=True).close() is None
     assert print_ledger.read(tmp_path).waypoints.size == 0
+
+
+def test_switch_records_sum_and_leave_the_stop_alone(tmp_path: Path) -> None:
+    led = Ledger(tmp_path, fresh=True)
+    led.stream(0, -1)
+    led.waypoint(0, 0)
+    led.switch(-0.25, 0.04)  # a start 40 ms late on the flow's clock
+    led.stopped(12)
+    led.switch(0.125, 0.02)  # a stop's latency recorded after the stream stopped
+    led.close()
+    printed = print_ledger.read(tmp_path)
+    assert printed.switches == 2 and printed.switch_mm3 == -0.125
+    assert printed.stop == 12 and list(printed.waypoints) == [0]
