@@ -1,11 +1,12 @@
 """The e-stop node: the cell's resident e-stop path.
 
 It is on the bus from the cell's start, so an e-stop costs one publish instead of a zenoh
-start-up. It listens on a Unix socket (``socket``, mode 0600; ``estop_socket``): a line
-``{"reason": ...}`` publishes an ``EStop`` on ``estop/estop`` at once (the robot node stops its
-stream in one servo period and the screw with it; the extruder node stops the motor and latches
-the e-stop), then the node waits for the nodes to confirm (``estop_check``) and answers one
-JSON line: when it was sent, what stopped and when, and whether every node confirmed.
+start-up. It listens on a Unix socket (``socket``, mode 0600; ``estop_socket``): a line (the
+reason, or ``{"reason": ...}``) publishes an ``EStop`` on ``estop/estop`` at once (the robot
+node stops its stream in one servo period and the screw with it; the extruder node stops the
+motor and latches the e-stop), then the node waits for the nodes to confirm (``estop_check``)
+and answers one JSON line: when it was sent, what stopped and when, and whether every node
+confirmed.
 Parameters: socket (path), jobs_db (the job store: which jobs were printing).
 """
 
@@ -77,7 +78,12 @@ class EStopNode(LifecycleNode):
             if not chunk:
                 break
             data += chunk
-        reason = str(json.loads(data.decode() or "{}").get("reason", "operator"))[:200]
+        line = data.decode(errors="replace").strip()
+        # the reason as plain text (``estop_socket.request_line``); a JSON object's "reason"
+        # (a wired button's ``echo '{}' | nc -U``); empty: the operator's
+        reason = (str(json.loads(line).get("reason", "operator")) if line.startswith("{")
+                  else line) or "operator"
+        reason = reason[:200]
         assert self.bus is not None
         sent = time.time()
         self.bus.publish("estop", EStop("operator (mesp estop)", reason, sent))
