@@ -2,8 +2,7 @@
 
 Commands (``robot/cmd``): ``load`` (path, sha256 of trajectory.npz) checks and resamples a
 trajectory; ``move`` (args ``to``: "home" | "sample", ``sample``) moves there on a checked safe
-path (``planner.entry``: retract along the nozzle axis out of the gel, transfer above it,
-plunge along the target's axis; refused with its reason if the cell model finds no such path);
+path (``robot_moves``);
 ``stream`` (args ``start``, ``end``, ``after_waypoint``, ``lead_s``, ``rate``: the job's
 extruder set-point, from its profile) streams the
 samples ``start`` .. ``end`` - 1 (default: to the end) and
@@ -60,13 +59,14 @@ from mesp_cell.nodes.interlock import Interlock, MustRun
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from mesp_cell.nodes.print_ledger import Ledger
 from mesp_cell.nodes.robot_driver import cell_of, home_and_tool, make_driver
+from mesp_cell.nodes.robot_moves import RobotMoves
 
 END = "\x00end"  # guard reason that ends a stream at its ``end`` sample (not a stop)
 
 log = logging.getLogger("mesp.robot")
 
 
-class RobotNode(LifecycleNode):
+class RobotNode(RobotMoves, LifecycleNode):
     """See the module docstring. Parameters: backend, host, servo (table), home_deg, tool_T,
     sim_clock (twin backends: the clock file shared with the extruder emulator), state_hz
     (100), extruder (node name), supervisor (node name), extruder_fresh_s (0.05: max age of the
@@ -260,89 +260,6 @@ class RobotNode(LifecycleNode):
         # A flag, not the thread's liveness: the motion is over once its end event is out,
         # even if its thread has not returned yet.
         return self._in_motion.is_set()
-
-    def _reach(self, job_dir: Path | None) -> Any:
-        """The planner's reachability model of this cell, gel filled as the job's plan
-        filled it (``fit_gel`` on the job's toolpath), or the cell's own fill."""
-        from planner.orientation import Reach
-        from planner.placement import fit_gel
-
-        cell = self.cell
-        if job_dir is not None and (job_dir / "toolpath.npz").is_file():
-            from core.stages import Toolpath
-
-            cell = fit_gel(cell, Toolpath.load(job_dir))
-        return Reach(cell)
-
-    def _safe_path(self, target: np.ndarray) -> tuple[StreamPlan | None, str]:
-        """A servo plan from the current joints to ``target`` on a checked safe path
-        (``planner.entry.safe_move``), or None and the reason there is none; None and ""
-        when the robot is already there."""
-        from planner import entry
-
-        q0 = np.asarray(self.driver.joints(), dtype=float)
-        if np.abs(q0 - target).max() < 1e-4:
-            return None, ""
-        if self.reach is None:
-            self.reach = self._reach(None)
-        reach = self.reach
-        move = entry.safe_move(reach, q0, target, entry.safe_heights(reach), tolerate_start=True)
-        if not move.ok:
-            return None, f"no safe path: {move.reason}"
-        timing = entry.time_move(reach, move)
-        dt = self.servo.dt
-        # hold the target a little at the end: the servo (lookahead) settles onto it
-        hold = np.ceil(max(0.2, 2.0 * self.servo.lookahead_s) / dt) * dt
-        tool_T = self.plan.tool_T if self.plan is not None else self.cell.tool.tool_T
-        return StreamPlan.of_path(dt, timing.t, move.q, tool_T, hold), ""
-
-    def _start_move(self, cmd: Command) -> Reply:
-        to = cmd.arg("to", "home")
-        if to == "home":
-            target = self.home
-        elif to == "sample":
-            if self.plan is None:
-                return Reply.refuse("no trajectory loaded")
-            k = int(cmd.arg("sample", 0))
-            if not 0 <= k < self.plan.samples:
-                return Reply.refuse(f"sample {k} outside the trajectory")
-            target = self.plan.q_at(k)
-        else:
-            return Reply.refuse(f"unknown move target '{to}'")
-        path, why = self._safe_path(np.asarray(target, dtype=float))
-        if why:
-            return Reply.refuse(why)
-        self._abort_move.clear()
-
-        def guard(k: int) -> str:
-            if self.estopped:
-                return self.estopped
-            return "move interrupted" if self._abort_move.is_set() else ""
-
-        def run() -> None:
-            self.mode = "moving"
-            log.info("move of %s to %s (%d servo samples)", cmd.job_id, to,
-                     0 if path is None else path.samples)
-            ok, why = False, "move interrupted"
-            try:
-                if path is None:
-                    ok = not self._abort_move.is_set()
-                else:
-                    result = ServoStream(self.driver, path, 0, guard).run()
-                    ok, why = result.done, result.reason or why
-            except Exception as exc:  # the end event must go out whatever happened
-                log.exception("move failed")
-                why = f"move failed: {exc}"
-            finally:
-                self.mode = "idle" if ok else "stopped"
-                self._in_motion.clear()
-            log.info("move of %s to %s %s", cmd.job_id, to, "done" if ok else why)
-            self._event(StreamEvent(cmd.job_id, "moved" if ok else "stopped",
-                                    "" if ok else why, -1, time.time()))
-
-        self._in_motion.set()
-        self._motion = self.spawn(run, "move")
-        return Reply.done()
 
     def _start_stream(self, cmd: Command) -> Reply:
         plan = self.plan
