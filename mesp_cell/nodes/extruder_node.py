@@ -81,6 +81,7 @@ class ExtruderNode(LifecycleNode):
         self._running = False  # the motor ran in the last state read
         self._exchange_t = 0.0  # monotonic s the current poll exchange began (0 = none)
         self._late_sent = False  # the current exchange was already published as late
+        self._exchange_failed0 = 0  # the driver's failed attempts before the current exchange
         self._seq = 0
         try:
             with self.lock:
@@ -126,13 +127,18 @@ class ExtruderNode(LifecycleNode):
 
     def _watch(self) -> None:
         """Every 10 ms: publish a link fault for an exchange past its deadline (the poll
-        thread is stuck in it), and stop a running motor whose robot went silent."""
+        thread is stuck in it: a frozen controller) or with a failed attempt (a dropped or
+        refused connection, at once, while the driver retries), and stop a running motor
+        whose robot went silent."""
         while not self.stopping.wait(0.01):
             now = time.monotonic()
             t0 = self._exchange_t
-            if t0 and now - t0 > self.deadline_s and not self._late_sent and self.bus:
+            failed = getattr(self.driver, "attempts_failed", 0) > self._exchange_failed0
+            if (t0 and (failed or now - t0 > self.deadline_s) and not self._late_sent
+                    and self.bus):
                 self._late_sent = True
-                detail = (f"the extruder controller did not answer within "
+                detail = ("the link to the extruder controller failed (the driver retries)"
+                          if failed else f"the extruder controller did not answer within "
                           f"{self.deadline_s * 1000:.0f} ms")
                 log.error("%s", detail)
                 self.bus.publish("state", ExtruderState(time.time(), self._seq, 0.0, 0.0, 0.0,
@@ -201,6 +207,7 @@ class ExtruderNode(LifecycleNode):
             t_lock = t_ex = t0
             try:
                 self._late_sent = False
+                self._exchange_failed0 = failed0
                 self._exchange_t = t0
                 with self.lock:
                     t_lock = time.monotonic()
