@@ -60,8 +60,15 @@ class Switcher:
 
     def __init__(self, send: Callable[[str, float], str], clock: Callable[[], float],
                  time_scale: float) -> None:
-        self.send, self.clock, self.time_scale = send, clock, float(time_scale)
+        self.send, self._clock, self.time_scale = send, clock, float(time_scale)
         self._queue: queue.Queue[Switch] = queue.Queue()
+        self._latest = float("-inf")
+
+    def clock(self) -> float:
+        """The flow's clock, never back: a twin that lags pulls the shared clock back to its
+        own time, and the emulated flow holds until the clock passes where it was."""
+        self._latest = max(self._latest, self._clock())
+        return self._latest
 
     def put(self, verb: str, rate: float, step: float = 0.0,
             job_dir: Path | None = None) -> None:
