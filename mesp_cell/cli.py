@@ -7,10 +7,19 @@ command exits 130; nothing else is swallowed.
 
 from __future__ import annotations
 
+import sys
+
+if sys.argv[1:2] == ["estop"] and __name__ != "__main__":  # `mesp estop`: the stop first
+    from mesp_cell.estop_socket import fast_estop
+
+    _code = fast_estop(sys.argv[2:])
+    if _code is not None:
+        sys.exit(_code)
+
+# the rest only after the e-stop's dispatch above: the stop waits for no import
 import argparse
 import importlib
 import pkgutil
-import sys
 import typing
 from collections.abc import Sequence
 
@@ -49,6 +58,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the `mesp` console script."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["estop"]:  # the stop must not wait for every command to be imported
+        from mesp_cell.estop_socket import fast_estop
+
+        code = fast_estop(argv[1:])
+        if code is not None:
+            return code
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

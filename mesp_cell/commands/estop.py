@@ -1,4 +1,10 @@
-"""`mesp estop`: stop every motion and extrusion of a running cell at once."""
+"""`mesp estop`: stop every motion and extrusion of a running cell at once.
+
+The stop goes through the cell's resident e-stop node when it runs: ``mesp_cell.cli`` hands
+`mesp estop` to ``estop_socket.fast_estop`` before it imports anything else, so the stop is
+published after the interpreter's start-up and a Unix-socket write. Without the node (a cell
+launched without it) this command joins the bus itself, which takes seconds.
+"""
 
 from __future__ import annotations
 

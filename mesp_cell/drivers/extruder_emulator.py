@@ -4,7 +4,8 @@ Run as a process (``python -m mesp_cell.drivers.extruder_emulator --port 0``; it
 ``listening <host> <port>`` on stdout once it accepts connections) or in a thread
 (``EmulatorThread``) in tests. The register map is ``registers.py``; registers 100-101 inject
 faults: a disconnect closes every connection and the listening socket for the set time, a
-stall latches the stall fault.
+stall latches the stall fault, a freeze holds every request unanswered (the connections stay
+open, the plant runs on), a slip makes the screw turn at half its set-point without a fault.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ class ModbusEmulator:
         self.regs = [0] * R.SIZE
         self.regs[R.WATCHDOG_MS] = int(params.watchdog_s * 1000)
         self._inject_until = 0.0
+        self._frozen_until = 0.0  # monotonic s until which requests go unanswered
         self._stop: asyncio.Event | None = None
         self._server: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -79,12 +81,16 @@ class ModbusEmulator:
         now = time.monotonic()
         self._inject_until = now + seconds if seconds > 0 else float("inf")
         self.plant.set_stall(kind == R.INJECT_STALL, now)
+        self.plant.set_slip(0.5 if kind == R.INJECT_SLIP else 1.0, now)
+        self._frozen_until = self._inject_until if kind == R.INJECT_FREEZE else 0.0
         if kind == R.INJECT_DISCONNECT and self._loop is not None:
             self._loop.call_soon(lambda: asyncio.ensure_future(self._disconnect(seconds)))
 
     async def _action(self, function_code: int, start_address: int, address: int, count: int,
                       current_registers: list[int],
                       set_values: list[int] | list[bool] | None) -> None:
+        while time.monotonic() < self._frozen_until:  # frozen: hold the request unanswered
+            await asyncio.sleep(0.01)
         self.plant.step(time.monotonic())
         if set_values is not None:
             self._apply_writes(address, [int(v) for v in set_values])
@@ -121,6 +127,7 @@ class ModbusEmulator:
             if self._inject_until and now >= self._inject_until:
                 self._inject_until = 0.0
                 self.plant.set_stall(False, now)
+                self.plant.set_slip(1.0, now)
             await asyncio.sleep(self.cycle_s)
 
     async def serve(self) -> None:

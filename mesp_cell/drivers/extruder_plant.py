@@ -70,6 +70,7 @@ class ExtruderPlant:
         self.running = False
         self.fault = 0
         self.stalled = False
+        self.slip = 1.0  # fraction of the set-point the screw really turns at (injected slip)
         self.cycles = 0
         self._host_hb = -1
         self._host_hb_t = now
@@ -91,7 +92,7 @@ class ExtruderPlant:
             if self.stalled and self.running:
                 self.fault |= FAULT_STALL
             on = self.running and not self.stalled and self.fault == 0
-            target = self.rate_set if on else 0.0
+            target = self.rate_set * self.slip if on else 0.0
             tau = self.params.tau_s
             decay = math.exp(-dt / tau)
             e1 = self.rate - target
@@ -153,11 +154,18 @@ class ExtruderPlant:
         with self._lock:
             self.stalled = stalled
 
+    def set_slip(self, fraction: float, now: float) -> None:
+        """Inject a slipping screw turning at ``fraction`` of its set-point (1 = none): no
+        fault, only the measured rate shows it."""
+        self.step(now)
+        with self._lock:
+            self.slip = fraction
+
     def status_word(self) -> int:
         """The STATUS register."""
         from mesp_cell.drivers import registers as R
 
-        at_set = self.running and abs(self.rate - self.rate_set) <= 0.05 * max(
+        at_set = self.running and abs(self.rate - self.rate_set) <= R.AT_SET_BAND * max(
             self.rate_set, 1e-9
         )
         return (

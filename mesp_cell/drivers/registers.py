@@ -20,7 +20,8 @@ RATE = 12            # float32 (12-13), mm^3/s, measured rate
 VOLUME = 14          # u32 (14-15), 0.01 mm^3, volume totaliser since power-up
 CTRL_HEARTBEAT = 16  # u16, the controller increments it every control cycle
 # Emulator only (absent on the real controller): fault injection
-INJECT = 100         # u16: 0 none, 1 disconnect the link, 2 stall the motor
+INJECT = 100         # u16: 0 none, 1 disconnect the link, 2 stall the motor, 3 freeze the
+                     # server (requests unanswered), 4 slip (the screw turns at half the set-point)
 INJECT_TIME = 101    # u16, 0.1 s units, how long the injected fault lasts (0 = until cleared)
 
 SIZE = 128           # registers served by the emulator
@@ -31,12 +32,18 @@ CMD_RESET = 1 << 1   # rising edge clears latched faults
 CMD_ESTOP = 1 << 2   # 1 = emergency stop: motor off, FAULT_ESTOP latched
 
 ST_RUNNING = 1 << 0  # motor on
-ST_AT_SET = 1 << 1   # measured rate within 5 % of the set-point
+ST_AT_SET = 1 << 1   # measured rate within AT_SET_BAND of the set-point
 ST_FAULT = 1 << 2    # a fault is latched
 ST_READY = 1 << 3    # powered, no fault
 
 INJECT_DISCONNECT = 1
 INJECT_STALL = 2
+INJECT_FREEZE = 3
+INJECT_SLIP = 4
+
+#: the controller's accuracy of its measured rate: "at set-point" (ST_AT_SET) within this
+#: fraction of the set-point once settled (the robot's flow check uses the same band)
+AT_SET_BAND = 0.05
 
 
 def float_to_regs(value: float) -> list[int]:

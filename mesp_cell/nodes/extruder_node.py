@@ -18,7 +18,15 @@ from typing import Any
 
 from mesp_cell.command_checks import rate_refusal
 from mesp_cell.drivers.extruder_base import ExtruderDriver, ExtruderLinkError
-from mesp_cell.messages import FAULT_ESTOP, FAULT_LINK, Command, EStop, ExtruderState, Reply
+from mesp_cell.messages import (
+    FAULT_ESTOP,
+    FAULT_LINK,
+    Command,
+    EStop,
+    ExtruderState,
+    Reply,
+    RobotState,
+)
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 
 log = logging.getLogger("mesp.extruder")
@@ -46,7 +54,8 @@ def make_extruder(params: dict[str, Any]) -> ExtruderDriver:
 class ExtruderNode(LifecycleNode):
     """See the module docstring. Parameters: driver, host, port (or url), retries, timeout_s,
     retry_delay_s, watchdog_ms, state_hz (100), heartbeat_hz (20), robot and supervisor (node
-    names)."""
+    names), deadline_s (0.08: an unanswered exchange is a link fault after this), robot_fresh_s
+    (0.2: the motor stops when no robot state came for this long while it runs)."""
 
     def on_configure(self) -> None:
         p = self.params
@@ -66,6 +75,13 @@ class ExtruderNode(LifecycleNode):
         self.connected = False
         self.detail = ""
         self.want_stop = False
+        self.deadline_s = float(p.get("deadline_s", 0.08))
+        self.robot_fresh_s = float(p.get("robot_fresh_s", 0.2))
+        self._robot_t = time.monotonic()  # when the last robot state arrived
+        self._running = False  # the motor ran in the last state read
+        self._exchange_t = 0.0  # monotonic s the current poll exchange began (0 = none)
+        self._late_sent = False  # the current exchange was already published as late
+        self._exchange_failed0 = 0  # the driver's failed attempts before the current exchange
         self._seq = 0
         try:
             with self.lock:
@@ -79,9 +95,11 @@ class ExtruderNode(LifecycleNode):
     def on_activate(self) -> None:
         assert self.bus is not None
         self.bus.subscribe("estop", "estop", EStop, self._on_estop)
+        self.bus.subscribe(self.robot_name, "state", RobotState, self._on_robot)
         self.bus.watch_presence(self._on_presence)
         self.bus.serve(self._on_command)
         self.spawn(self._poll, "poll")
+        self.spawn(self._watch, "watch")
 
     def on_deactivate(self) -> None:
         self._safe_stop("extruder node shutting down")
@@ -103,6 +121,32 @@ class ExtruderNode(LifecycleNode):
     def _on_presence(self, node: str, alive: bool) -> None:
         if not alive and node in (self.robot_name, self.supervisor_name):
             self._safe_stop(f"{node} process lost")
+
+    def _on_robot(self, msg: RobotState) -> None:
+        self._robot_t = time.monotonic()
+
+    def _watch(self) -> None:
+        """Every 10 ms: publish a link fault for an exchange past its deadline (the poll
+        thread is stuck in it: a frozen controller) or with a failed attempt (a dropped or
+        refused connection, at once, while the driver retries), and stop a running motor
+        whose robot went silent."""
+        while not self.stopping.wait(0.01):
+            now = time.monotonic()
+            t0 = self._exchange_t
+            failed = getattr(self.driver, "attempts_failed", 0) > self._exchange_failed0
+            if (t0 and (failed or now - t0 > self.deadline_s) and not self._late_sent
+                    and self.bus):
+                self._late_sent = True
+                detail = ("the link to the extruder controller failed (the driver retries)"
+                          if failed else f"the extruder controller did not answer within "
+                          f"{self.deadline_s * 1000:.0f} ms")
+                log.error("%s", detail)
+                self.bus.publish("state", ExtruderState(time.time(), self._seq, 0.0, 0.0, 0.0,
+                                                        False, False, FAULT_LINK, detail))
+            if self._running and now - self._robot_t > self.robot_fresh_s:
+                self._running = False
+                self._safe_stop(f"no state from {self.robot_name} for "
+                                f"{(now - self._robot_t) * 1000:.0f} ms")
 
     def _on_estop(self, msg: EStop) -> None:
         self._safe_stop(f"e-stop from {msg.source}", estop=True)
@@ -162,6 +206,9 @@ class ExtruderNode(LifecycleNode):
             failed0 = getattr(self.driver, "attempts_failed", 0)
             t_lock = t_ex = t0
             try:
+                self._late_sent = False
+                self._exchange_failed0 = failed0
+                self._exchange_t = t0
                 with self.lock:
                     t_lock = time.monotonic()
                     if self.want_stop:
@@ -171,11 +218,14 @@ class ExtruderNode(LifecycleNode):
                         self.driver.heartbeat()
                     r = self.driver.read()
                     t_ex = time.monotonic()
+                self._exchange_t = 0.0
+                self._running = r.running
                 self.connected = True
                 msg = ExtruderState(time.time(), self._seq, r.rate_set, r.rate, r.volume,
                                     r.running, True, r.fault,
                                     "" if not r.fault else f"controller fault bits {r.fault:#x}")
             except ExtruderLinkError as exc:
+                self._exchange_t = 0.0
                 if self.connected:
                     log.error("%s", exc)
                 self.connected, self.detail, self.want_stop = False, str(exc), True

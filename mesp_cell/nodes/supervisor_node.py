@@ -9,7 +9,11 @@ sample, prime and start extrusion ``lead_s`` ahead of deposition
 switches the extruder ``lead_s`` ahead of every change of ``extrude``, on the servo clock),
 record a checkpoint at every deposited waypoint, publish progress, stop the extruder, park.
 A stream that stops early (node lost, fault, e-stop) leaves the job ``interrupted`` with its
-checkpoint; ``resume`` restarts from it. A fresh print waits in ``ready_check`` until the
+checkpoint; ``resume`` restarts right after the last waypoint the robot's ledger holds (what it
+printed, ``print_ledger``), whatever the supervisor saw before it was killed. A job is done only
+when the ledger holds every deposition waypoint exactly once and the ink extruded for the part
+is the toolpath's within ``VOLUME_TOLERANCE`` (``print_check``); otherwise it fails with why.
+How one job prints is ``print_loop``. A fresh print waits in ``ready_check`` until the
 operator confirms the tank (``ready``); an abort retracts the nozzle along its axis and goes
 home on the robot's checked safe path. Commands (``supervisor/cmd``): ``pause``, ``resume``,
 ``abort``, ``ready`` (job_id); ``resume`` and ``ready`` are refused while an e-stop is latched.
@@ -25,29 +29,23 @@ import logging
 import queue
 import threading
 import time
-from collections import deque
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 from core.errors import InputError
-from core.report import update_report
-from mesp_cell.drivers.stream import StreamPlan, sha256_of
 from mesp_cell.jobs import JobRecord, JobStore
 from mesp_cell.messages import (
     FAULT_ESTOP,
     Command,
     ExtruderState,
-    JobProgress,
     Reply,
     RobotState,
     StreamEvent,
     WaypointReached,
 )
 from mesp_cell.nodes.lifecycle import LifecycleNode, node_main
-from mesp_cell.profiles import stale_reason
+from mesp_cell.nodes.print_loop import PrintLoop
 from mesp_cell.step_timeouts import plan_timeout, slice_timeout
-from slicer.extrusion import ExtrusionProfile, load_job_profile
 
 log = logging.getLogger("mesp.supervisor")
 
@@ -57,15 +55,11 @@ READY_REASON = ("waits for the operator: remove the last part, check the gel lev
                 "confirm the tank is ready")
 
 
-class Stopped(Exception):
-    """The print stopped early; ``args[0]`` is the reason."""
-
-
-class SupervisorNode(LifecycleNode):
-    """See the module docstring. Parameters: jobs_db, lead_s, prime_s, dt,
-    time_scale (of the twin and the emulated extruder: ETA, lead and prime waits), settle_s,
-    robot/extruder/slicer/planner (node names), slice_timeout_s, plan_timeout_s, move_timeout_s,
-    poll_s."""
+class SupervisorNode(PrintLoop, LifecycleNode):
+    """See the module docstring (the print of one job: ``PrintLoop``). Parameters: jobs_db,
+    lead_s, prime_s, dt, time_scale (of the twin and the emulated extruder: ETA, lead and
+    prime waits), settle_s, robot/extruder/slicer/planner (node names), slice_timeout_s,
+    plan_timeout_s, move_timeout_s, poll_s."""
 
     def on_configure(self) -> None:
         p = self.params
@@ -159,7 +153,9 @@ class SupervisorNode(LifecycleNode):
             return Reply.done(state=job.state)
         if cmd.verb in ("pause", "abort"):
             with self._lock:
-                if self.current == job.id:
+                # still printing: the print loop stops it (a job already paused while the loop
+                # waits for its screw to settle is aborted below, like any paused job)
+                if self.current == job.id and self.store.get(job.id).state == "printing":
                     self.request = cmd.verb
                     self._request(self.names["robot"], Command.make("stop", reason=cmd.verb), 2.0)
                     return Reply.done()
@@ -174,45 +170,14 @@ class SupervisorNode(LifecycleNode):
         return Reply.refuse(f"unknown supervisor command '{cmd.verb}'")
 
     # -- helpers ---------------------------------------------------------------------------
-    def _request(self, node: str, cmd: Command, timeout: float = 5.0) -> Reply:
-        assert self.bus is not None
-        return self.bus.request(node, cmd, timeout)
 
     def _need(self, *nodes: str) -> str:
         missing = [self.names[n] for n in nodes if self.names[n] not in self.alive]
         return f"node(s) {', '.join(missing)} not running" if missing else ""
 
-    def _wait_event(self, job_id: str, timeout: float) -> StreamEvent:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if self.names["robot"] not in self.alive:
-                raise Stopped(f"{self.names['robot']} process lost")
-            try:
-                ev = self.events.get(timeout=0.05)
-            except queue.Empty:
-                continue
-            if ev.job_id == job_id:
-                return ev
-        raise Stopped(f"robot did not finish within {timeout:g} s")
 
-    def _check_request(self) -> None:
-        """Raise ``Stopped`` if the operator paused or aborted the current job."""
-        if self.request:
-            raise Stopped(f"{self.request} requested")
 
-    def _move(self, job_id: str, **args: Any) -> None:
-        self._check_request()
-        reply = self._request(self.names["robot"], Command.make("move", job_id, **args))
-        if not reply.ok:
-            raise Stopped(reply.reason)
-        ev = self._wait_event(job_id, self.timeouts["move"])
-        if ev.kind != "moved":
-            raise Stopped(ev.reason or "move interrupted")
 
-    def _extruder(self, verb: str, **args: Any) -> None:
-        reply = self._request(self.names["extruder"], Command.make(verb, **args), 2.0)
-        if not reply.ok:
-            raise Stopped(f"extruder refused {verb}: {reply.reason}")
 
     # -- the work loop ---------------------------------------------------------------------
     def _work(self) -> None:
@@ -252,35 +217,12 @@ class SupervisorNode(LifecycleNode):
             job_id, self.park = self.park, ""
         self.store.note(job_id, self._retract(job_id))
 
-    def _retract(self, job_id: str) -> str:
-        """Move home on the robot's checked safe path (retract along the nozzle axis, transfer
-        above the gel); returns what happened, for the job's history."""
-        reply = self._request(self.names["robot"], Command.make("move", job_id, to="home"))
-        if not reply.ok:
-            return f"nozzle not retracted: {reply.reason}"
-        try:
-            ev = self._wait_event(job_id, self.timeouts["move"])
-        except Stopped as exc:
-            return f"nozzle not retracted: {exc}"
-        if ev.kind != "moved":
-            return f"nozzle not retracted: {ev.reason or 'move interrupted'}"
-        return "nozzle retracted along its axis out of the gel and parked at home"
-
     def _fail(self, job_id: str, reason: str) -> None:
         try:
             self.store.transition(job_id, "failed", reason)
         except InputError:  # aborted by the operator meanwhile: that state stands
             log.info("job %s not failed (%s): %s", job_id, self.store.get(job_id).state, reason)
 
-    def _job_profile(self, job: JobRecord) -> ExtrusionProfile:
-        """The profile ``job`` was sliced with, if it is the cell's active calibration."""
-        profile = load_job_profile(Path(job.dir))
-        why = stale_reason(profile, self.cell)
-        if why:
-            raise InputError(why, "re-submit the job to slice it with the active profile, or "
-                             f"`mesp profile activate {Path(job.dir) / 'profile.toml'} --on "
-                             f"{self.cell}`")
-        return profile
 
     def _stage(self, job: JobRecord, verb: str, next_state: str) -> None:
         node = self.names["slicer" if verb == "slice" else "planner"]
@@ -322,201 +264,17 @@ class SupervisorNode(LifecycleNode):
             return slice_timeout(Path(job.model), Path(job.job_file) if job.job_file else None)
         return plan_timeout(Path(job.dir))
 
-    def _print(self, job: JobRecord) -> None:
-        resume = job.state in ("paused", "interrupted")
-        traj = Path(job.dir) / "trajectory.npz"
-        if not traj.is_file():
-            raise InputError(f"job {job.id} has no trajectory.npz", "re-submit the job")
-        profile = self._job_profile(job)
-        self.setpoint = profile.setpoint_mm3_s
-        self.true_per_nominal = profile.rate_mm3_s / profile.setpoint_mm3_s
-        plan = StreamPlan.load(traj, self.dt)
-        digest = sha256_of(traj)
-        robot = self.names["robot"]
-        reply = self._request(robot, Command.make("load", job.id, path=str(traj), sha256=digest))
-        if not reply.ok:
-            raise InputError(f"pre-flight: {reply.reason}", "fix the job and re-submit it")
-        self.store.set_sizes(job.id, plan.layers, int(plan.wp_id.size), plan.samples)
-        start = max(job.sample, 0) if resume else 0
-        after = job.waypoint if resume else -1
-        with self._lock:
-            self.current, self.request = job.id, ""
-        while not self.events.empty():
-            self.events.get_nowait()
-        self.store.transition(job.id, "printing", "resumed" if resume else "", expect=job.state)
-        ext0 = self.extruder_state.volume if self.extruder_state else 0.0
-        try:
-            if not resume:
-                self._move(job.id, to="home")
-            # the robot node moves on a checked safe path: out of the gel along the nozzle
-            # axis, above it, and into it along the target sample's axis (sample 0 is home)
-            self._move(job.id, to="sample", sample=start)
-            first = plan.first_extruding()
-            if start < first:
-                # the planned entry (home -> plunge to the first waypoint) deposits nothing:
-                # stream it, then lead and prime at rest at the first deposition sample
-                ev = self._stream(job, plan, ext0, start, after, end=first)
-                self._drain(job.id)
-                if ev.kind != "done":
-                    raise Stopped(ev.reason or "stream stopped")
-                start = first
-            lead_n = round(self.lead_s / self.dt)
-            # Starting acknowledges a latched watchdog/stall fault (e.g. left by a killed
-            # extruder node); an e-stop is only cleared by the operator (`mesp estop --reset`).
-            self._extruder("clear")
-            on = plan.extrude_at(min(start + lead_n, plan.samples - 1))
-            if on:
-                self._extruder("start", rate=self.setpoint)
-                # Lead and prime run on the extruder's (the twin's) clock; the switch-on must
-                # also show in the extruder state (wall-clock latency) before the stream starts.
-                wait = (self.lead_s + (0.0 if resume else self.prime_s)) / self.time_scale
-                time.sleep(max(wait, min(self.lead_s, self.settle_s)))
-            ev = self._stream(job, plan, ext0, start, after)
-            if ev.kind == "done":
-                self._extruder("stop")
-            self._drain(job.id)
-            if ev.kind != "done":
-                raise Stopped(ev.reason or "stream stopped")
-            self._move(job.id, to="home")
-            volume = self._volume(job, ext0)
-            self.store.progress(job.id, 100.0, 0.0, volume)
-            update_report(Path(job.dir), {"print": {
-                "cell": self.cell, "volume_mm3": volume,
-                "profile": {"name": profile.name, "sha256": profile.sha256,
-                            "rate_mm3_s": profile.rate_mm3_s,
-                            "setpoint_mm3_s": profile.setpoint_mm3_s,
-                            "calibrated": profile.calibrated}}})
-            self.store.transition(job.id, "done")
-        except Stopped as exc:
-            self._stopped(job, str(exc), ext0)
-        finally:
-            with self._lock:
-                self.current, self.request = "", ""
-
-    def _stream(self, job: JobRecord, plan: StreamPlan, ext0: float, start: int, after: int,
-                end: int | None = None) -> StreamEvent:
-        """Stream samples ``start`` .. ``end`` - 1 (to the end by default) and follow it."""
-        self._check_request()
-        args: dict[str, Any] = {"start": start, "after_waypoint": after, "lead_s": self.lead_s,
-                                "rate": self.setpoint}
-        if end is not None:
-            args["end"] = end
-        reply = self._request(self.names["robot"], Command.make("stream", job.id, **args))
-        if not reply.ok:
-            raise Stopped(reply.reason)
-        return self._monitor(job, plan, ext0)
-
-    def _stopped(self, job: JobRecord, reason: str, ext0: float) -> None:
-        try:
-            self._request(self.names["extruder"], Command.make("stop"), 1.0)
-            self._request(self.names["robot"], Command.make("stop", reason=reason), 1.0)
-        finally:
-            self._drain(job.id)
-            self.store.progress(job.id, self.store.get(job.id).percent, 0.0,
-                                self._volume(job, ext0))
-            req = self.request
-            if req == "pause":
-                self.store.transition(job.id, "paused", "paused by the operator")
-            elif req == "abort":  # aborted once out of the gel (or why it could not be)
-                self.store.transition(job.id, "aborted",
-                                      f"aborted by the operator; {self._retract(job.id)}")
-            else:
-                self.store.transition(job.id, "interrupted", reason)
-            log.warning("job %s stopped: %s", job.id, reason)
-
-    def _volume(self, job: JobRecord, ext0: float) -> float:
-        """mm^3 extruded: the controller's totaliser (nominal) times the profile's C per
-        set-point (what weighing found it really delivers)."""
-        now = self.extruder_state.volume if self.extruder_state else ext0
-        return job.volume + max(0.0, now - ext0) * self.true_per_nominal
-
-    def _drain(self, job_id: str) -> None:
-        """Record the waypoints still queued (they may trail the stream's end event)."""
-        time.sleep(0.05)
-        last: WaypointReached | None = None
-        while not self.waypoints.empty():
-            wp = self.waypoints.get_nowait()
-            if wp.job_id == job_id:
-                last = wp
-        if last is not None:
-            self.store.checkpoint(job_id, last.layer, last.waypoint, last.sample)
-
-    def _monitor(self, job: JobRecord, plan: StreamPlan, ext0: float) -> StreamEvent:
-        """Follow the stream (checkpoints, progress) until it ends. The robot node switches
-        the extruder on the servo clock."""
-        assert self.bus is not None
-        K = plan.samples
-        last_report = 0.0
-        eta_of = EtaEstimate(self.time_scale / self.dt)
-        layer = max(job.layer, 0)
-        wp_last = job.waypoint
-        while True:
-            if self.names["robot"] not in self.alive:
-                raise Stopped(f"{self.names['robot']} process lost")
-            if self.names["extruder"] not in self.alive:
-                self._request(self.names["robot"], Command.make("stop", reason="extruder lost"),
-                              1.0)
-            if self.request:
-                self._request(self.names["robot"], Command.make("stop", reason=self.request),
-                              1.0)
-            try:
-                ev = self.events.get(timeout=0.01)
-                if ev.job_id == job.id and ev.kind in ("done", "stopped"):
-                    return ev
-            except queue.Empty:
-                pass
-            last: WaypointReached | None = None
-            while not self.waypoints.empty():
-                wp = self.waypoints.get_nowait()
-                if wp.job_id == job.id:
-                    last = wp
-            if last is not None:
-                self.store.checkpoint(job.id, last.layer, last.waypoint, last.sample)
-                layer, wp_last = max(last.layer, 0), last.waypoint
-            rs = self.robot_state
-            s = rs.sample if rs is not None and rs.job_id == job.id else -1
-            now = time.monotonic()
-            if now - last_report > 0.2 and s >= 0:
-                last_report = now
-                percent = 100.0 * (s + 1) / K
-                eta = eta_of(now, s, K - 1 - s)
-                vol = self._volume(job, ext0)
-                self.store.progress(job.id, percent, eta, vol)
-                self.bus.publish("progress", JobProgress(
-                    job.id, "printing", layer, plan.layers, wp_last, int(plan.wp_id.size),
-                    percent, eta, vol, time.time()))
 
 
-class EtaEstimate:
-    """Time left from the pace the stream keeps, not the pace it was asked for.
 
-    A twin that cannot keep its time scale (MuJoCo at 80x on 2 cores ran at ~64x) would make
-    ``remaining x dt / time_scale`` promise too early an end. The pace is measured over the
-    last ``WINDOW_S`` of wall time, once at least ``MIN_SPAN_S`` of it is seen; before that,
-    and while no sample advances, the nominal pace stands.
 
-    Args:
-        nominal: samples per wall second asked for (``time_scale / dt``).
-    """
 
-    WINDOW_S = 30.0
-    MIN_SPAN_S = 2.0
 
-    def __init__(self, nominal: float) -> None:
-        self.nominal = nominal
-        self._seen: deque[tuple[float, int]] = deque()
 
-    def __call__(self, now: float, sample: int, remaining: int) -> float:
-        """Seconds of wall time left, with ``sample`` reached at ``now`` (monotonic s)."""
-        seen = self._seen
-        seen.append((now, sample))
-        while len(seen) > 2 and now - seen[1][0] >= self.WINDOW_S:
-            seen.popleft()
-        t0, s0 = seen[0]
-        pace = self.nominal
-        if now - t0 >= self.MIN_SPAN_S and sample > s0:
-            pace = (sample - s0) / (now - t0)
-        return max(remaining, 0) / pace
+
+
+
+
 
 
 def main(argv: Sequence[str] | None = None) -> int:

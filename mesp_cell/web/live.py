@@ -20,6 +20,7 @@ import numpy as np
 from core.status import JobState
 from mesp_cell.drivers.stream import StreamPlan
 from mesp_cell.messages import FAULT_ESTOP, ExtruderState, JobProgress, RobotState
+from mesp_cell.planned_ink import planned_ink
 
 FAULT_NAMES = {1 << 0: "watchdog", 1 << 1: "stall", 1 << 2: "overload", 1 << 3: "e-stop",
                1 << 8: "link"}
@@ -41,28 +42,6 @@ class JobPlan:
     duration_s: float
     min_clearance_mm: float
     plan: StreamPlan | None
-
-
-def planned_ink(job_dir: Path) -> float:
-    """mm^3 the toolpath deposits: the slicer's report, else from ``toolpath.npz``."""
-    report = job_dir / "report.json"
-    if report.is_file():
-        try:
-            vol = json.loads(report.read_text()).get("toolpath", {}).get("deposited_volume_mm3")
-            if vol:
-                return float(vol)
-        except (OSError, ValueError):
-            pass
-    tp = job_dir / "toolpath.npz"
-    if not tp.is_file():
-        return 0.0
-    with np.load(tp) as z:
-        pos, path, ext = z["position"], z["path"], z["extrude"].astype(bool)
-        w, h = z["width"], z["height"]
-    seg = np.linalg.norm(np.diff(pos, axis=0), axis=1)
-    same = (path[1:] == path[:-1]) & ext[1:] & ext[:-1]
-    area = 0.5 * (w[1:] * h[1:] + w[:-1] * h[:-1])
-    return float(np.sum(seg * area * same))
 
 
 def load_job_plan(job_id: str, job_dir: Path, dt: float) -> JobPlan:

@@ -82,12 +82,9 @@ def console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
     token = load_token(home, create=True)  # configured: motion endpoints need it on loopback
     # the bundled sim launch, with a servo overrun watchdog that a loaded 2-core test host
     # does not trip (the interlocks are test_safety's subject, not the console's)
-    text = bundled_launch("sim").read_text()
-    launch_file = home / "sim.toml"
-    launch_file.write_text(text.replace("[process.params.servo]\n",
-                                        "[process.params.servo]\noverrun_s = 1.0\n", 1))
     try:  # the cell's processes take its home from the environment when they start
-        launch = start_cell(launch_file, overrides={
+        launch = start_cell(bundled_launch("sim"), overrides={
+            "servo_overrun_s": 1.0,
             "slice_fn": "tests.mesp_cell.synthetic:slice_job",
             "plan_fn": "tests.mesp_cell.conftest:plan_at_home", "prime_s": 0.1,
             "robot_backend": "twin", "time_scale": 0.5, "console_port": "auto",

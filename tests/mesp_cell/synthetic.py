@@ -28,30 +28,39 @@ RATE_HZ = 100.0  # trajectory sample rate
 TRAVEL = 12     # non-depositing samples between layers
 
 
-def toolpath() -> Toolpath:
-    """LAYERS square-ish contours of PER_LAYER waypoints, 0.6 mm apart in z."""
-    n = LAYERS * PER_LAYER
-    layer = np.repeat(np.arange(LAYERS), PER_LAYER).astype(np.int32)
-    ang = np.tile(np.linspace(0.0, 2 * np.pi, PER_LAYER, endpoint=False), LAYERS)
+def toolpath(rate: float | None = None, layers: int = LAYERS) -> Toolpath:
+    """LAYERS square-ish contours of PER_LAYER waypoints, 0.6 mm apart in z.
+
+    With ``rate`` (mm^3/s, the extruder's C) the width makes the toolpath's volume the ink the
+    cell extrudes along ``trajectory_arrays`` (STEP / RATE_HZ s of deposition per waypoint),
+    as a real plan's is; else 1.2 mm."""
+    n = layers * PER_LAYER
+    layer = np.repeat(np.arange(layers), PER_LAYER).astype(np.int32)
+    ang = np.tile(np.linspace(0.0, 2 * np.pi, PER_LAYER, endpoint=False), layers)
     pos = np.stack([10 * np.cos(ang), 10 * np.sin(ang), 0.6 * layer], axis=1)
     normal = np.tile([0.0, 0.0, 1.0], (n, 1))
+    width = 1.2
+    if rate is not None:  # PER_LAYER waypoints of deposition over PER_LAYER - 1 segments
+        seg = float(np.linalg.norm(pos[1] - pos[0]))
+        width = rate * PER_LAYER * STEP / RATE_HZ / ((PER_LAYER - 1) * seg * 0.6)
     return Toolpath(position=pos, normal=normal, layer=layer, path=layer.copy(),
-                    height=np.full(n, 0.6), width=np.full(n, 1.2), speed=np.full(n, 9.0),
+                    height=np.full(n, 0.6), width=np.full(n, width), speed=np.full(n, 9.0),
                     extrude=np.ones(n, bool), pattern=np.zeros(n, np.int8))
 
 
-def trajectory_arrays(n_waypoints: int, q_offset: float = 0.0) -> dict[str, np.ndarray]:
+def trajectory_arrays(n_waypoints: int, q_offset: float = 0.0,
+                      layers: int = LAYERS) -> dict[str, np.ndarray]:
     """A smooth joint motion around HOME that passes every waypoint in order.
 
     Layer l's waypoints follow each other every STEP samples; TRAVEL samples without
     deposition separate layers. ``q_offset`` (rad) shifts joint 1 (tests of bad trajectories).
     """
     rows_wp, rows_ex = [], []
-    for l in range(LAYERS):
+    for l in range(layers):
         for i in range(PER_LAYER):
             rows_wp += [l * PER_LAYER + i] + [-1] * (STEP - 1)
             rows_ex += [True] * STEP
-        if l < LAYERS - 1:
+        if l < layers - 1:
             rows_wp += [-1] * TRAVEL
             rows_ex += [False] * TRAVEL
     rows_wp += [-1]
@@ -78,8 +87,9 @@ def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
 
     if not Path(model).is_file():
         raise InputError(f"model {model} does not exist", "check the path")
-    toolpath().save(Path(out_dir))
-    active(cell).save_to_job(Path(out_dir))  # the cell's calibration, as the real slicer
+    profile = active(cell)
+    toolpath(profile.rate_mm3_s).save(Path(out_dir))
+    profile.save_to_job(Path(out_dir))  # the cell's calibration, as the real slicer
     return {}
 
 
@@ -93,6 +103,27 @@ def plan_job(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
 
         return adapters.plan_job(job_dir, cell_file)
     save_npz(Path(job_dir) / "trajectory.npz", trajectory_arrays(LAYERS * PER_LAYER))
+    return {}
+
+
+LONG_LAYERS = 12  # the fault tests' job: 4x the deposition, so a stop's blob weighs less
+
+
+def slice_long(model: Path, job_file: Path | None, out_dir: Path, cell: str,
+               cell_file: Path | None = None) -> dict[str, Any]:
+    """``slice_job`` with LONG_LAYERS layers."""
+    from mesp_cell.profiles import active
+
+    profile = active(cell)
+    toolpath(profile.rate_mm3_s, LONG_LAYERS).save(Path(out_dir))
+    profile.save_to_job(Path(out_dir))
+    return {}
+
+
+def plan_long(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
+    """``plan_job`` for ``slice_long``'s toolpath."""
+    save_npz(Path(job_dir) / "trajectory.npz",
+             trajectory_arrays(LONG_LAYERS * PER_LAYER, layers=LONG_LAYERS))
     return {}
 
 

@@ -18,8 +18,8 @@ def test_bundled_launch_files_parse(monkeypatch: pytest.MonkeyPatch, tmp_path: P
     monkeypatch.setenv("MESP_HOME", str(tmp_path))
     sim = load_launch(bundled_launch("sim"))
     assert [p.name for p in sim.processes] == [
-        "extruder-emulator", "extruder", "robot", "slicer", "planner", "recorder", "supervisor",
-        "console"]
+        "extruder-emulator", "extruder", "robot", "estop", "slicer", "planner", "recorder",
+        "supervisor", "console"]
     port = sim.vars["extruder_port"]
     assert isinstance(port, int) and port > 0
     ext = next(p for p in sim.processes if p.name == "extruder")

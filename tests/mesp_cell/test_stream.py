@@ -14,7 +14,7 @@ from core.errors import InputError
 from mesp_cell.drivers.robot_base import ServoConfig, ur5e_flange
 from mesp_cell.drivers.robot_twin import KinematicTwin
 from mesp_cell.drivers.stream import ServoStream, StreamPlan, sha256_of
-from mesp_cell.nodes.robot_node import MustRun, must_run_mask
+from mesp_cell.nodes.interlock import MustRun, must_run_mask
 from tests.mesp_cell import synthetic
 
 N_WP = synthetic.LAYERS * synthetic.PER_LAYER
@@ -336,7 +336,7 @@ def test_a_thirty_hour_job_loads_without_building_its_servo_samples(tmp_path: Pa
 def test_flow_sync_commands_the_rate_of_the_step_ahead() -> None:
     from dataclasses import replace
 
-    from mesp_cell.nodes.robot_node import FLOW_STEP, FlowSync
+    from mesp_cell.nodes.flow_sync import FLOW_STEP, FlowSync
 
     # 4 s of trajectory; from t = 2 to 3 s the arm moves at half the toolpath's speed
     plan = StreamPlan.of_path(0.1, np.arange(5.0), np.zeros((5, 6)), np.eye(4))

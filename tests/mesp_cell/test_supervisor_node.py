@@ -14,7 +14,7 @@ from mesp_cell.cell_client import CellClient
 from mesp_cell.jobs import JobRecord
 from mesp_cell.launcher import Launch
 from mesp_cell.messages import RobotState
-from mesp_cell.nodes.supervisor_node import EtaEstimate
+from mesp_cell.nodes.eta_estimate import EtaEstimate
 from planner.cell import load_cell
 from tests.mesp_cell.conftest import Console
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from core.errors import InputError
-from mesp_cell.web.live import planned_ink
+from mesp_cell.planned_ink import planned_ink
 from mesp_cell.web.preview import toolpath_preview
 from tests.mesp_cell import synthetic
 

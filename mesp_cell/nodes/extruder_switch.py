@@ -1,0 +1,112 @@
+"""The robot node's extruder switches, sent off the servo thread, their latency measured.
+
+The servo loop decides on its clock when the extruder starts, stops or changes rate
+(``lead_s`` ahead of deposition, ``FlowSync``); a bus request to the extruder node takes a few
+ms of wall time, so ``Switcher`` sends them from its own thread, in order.
+
+Each switch reaches the screw late by that latency. On the real cell (time scale 1) a few ms
+move a few thousandths of a mm^3. A twin ``time_scale`` times faster than real time counts the
+same wall-clock latency ``time_scale`` times over in simulated time, where the emulated
+extruder's flow integrates: at 40x a 1.5 ms later start than stop cost 6 % of a short-path
+job's ink, an ink no real cell would miss. So each switch's latency is measured on the clock
+the extruder's flow runs on (the twin's shared clock; the wall clock on the real cell), and the
+ink it moved beyond what the same switch would have moved in real time,
+``-(new - old rate) x latency x (1 - 1 / time_scale)`` (nominal mm^3), is appended to the
+job's ledger (``print_ledger.SWITCH``), where the print check takes it off the part's ink.
+At time scale 1 that excess is zero and nothing is recorded.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import NamedTuple
+
+from mesp_cell.nodes.print_ledger import Ledger
+
+log = logging.getLogger("mesp.robot")
+
+
+class Switch(NamedTuple):
+    """One extruder command from a stream.
+
+    Attributes:
+        verb: "start" | "stop" | "set_rate". rate: mm^3/s, the rate sent.
+        step: mm^3/s, the set-point change it makes (new - old; 0 for a safety stop).
+        due: s on the flow's clock when the servo loop decided it.
+        job_dir: the ledger's folder (None: not recorded, e.g. a safety stop).
+    """
+
+    verb: str
+    rate: float
+    step: float = 0.0
+    due: float = 0.0
+    job_dir: Path | None = None
+
+
+class Switcher:
+    """Sends ``Switch``es in order through ``send`` (verb, rate -> refusal reason or "").
+
+    Args:
+        send: the bus request to the extruder node; returns "" when done, else why not.
+        clock: s, the clock the extruder's flow runs on (the twin's ``SimClock.now``; the
+            wall clock on the real cell).
+        time_scale: the twin's speed-up (1 on the real cell).
+    """
+
+    def __init__(self, send: Callable[[str, float], str], clock: Callable[[], float],
+                 time_scale: float) -> None:
+        self.send, self._clock, self.time_scale = send, clock, float(time_scale)
+        self._queue: queue.Queue[Switch] = queue.Queue()
+        self._latest = float("-inf")
+
+    def clock(self) -> float:
+        """The flow's clock, never back: a twin that lags pulls the shared clock back to its
+        own time, and the emulated flow holds until the clock passes where it was."""
+        self._latest = max(self._latest, self._clock())
+        return self._latest
+
+    def put(self, verb: str, rate: float, step: float = 0.0,
+            job_dir: Path | None = None) -> None:
+        """Queue a switch decided now (thread-safe; returns at once)."""
+        self._queue.put(Switch(verb, rate, step, self.clock(), job_dir))
+
+    def run(self, stopping: threading.Event) -> None:
+        """Send queued switches until ``stopping`` is set (the node's thread)."""
+        while not stopping.is_set():
+            try:
+                sw = self._queue.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            why = self.send(sw.verb, sw.rate)
+            if why:
+                log.warning("extruder %s refused: %s", sw.verb, why)
+                continue
+            self._record(sw, self.clock() - sw.due)
+
+    def excess_mm3(self, step: float, latency: float) -> float:
+        """Nominal mm^3 a switch of ``step`` mm^3/s, ``latency`` s late on the flow's clock,
+        moved beyond what it would have moved in real time."""
+        return -step * latency * (1.0 - 1.0 / self.time_scale)
+
+    def _record(self, sw: Switch, latency: float) -> None:
+        if sw.job_dir is None or not sw.step or self.time_scale <= 1.0:
+            return
+        try:
+            ledger = Ledger(sw.job_dir, fresh=False)
+        except OSError as exc:  # the job's folder went away: nothing to account it to
+            log.warning("switch latency not recorded: %s", exc)
+            return
+        try:
+            ledger.switch(self.excess_mm3(sw.step, latency), latency)
+        finally:
+            ledger.close()
+
+
+def wall_clock() -> float:
+    """The real cell's flow clock: the wall clock, s."""
+    return time.monotonic()

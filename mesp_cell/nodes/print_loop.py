@@ -1,0 +1,384 @@
+"""How the supervisor prints one job: approach, prime, stream, follow, stop, check.
+
+``PrintLoop._print`` takes a job that is ready (or paused, or interrupted): the robot node
+loads and checks its trajectory, the arm goes home and to the start sample on its checked safe
+path, the planned entry is streamed up to the first deposition sample, the screw is primed and
+started ``lead_s`` ahead of deposition, and the trajectory is streamed (the robot node switches
+the extruder on the servo clock) while ``_monitor`` records checkpoints and publishes progress.
+A resume starts right after the last waypoint the robot's ledger holds (``print_ledger``). A
+stream that stops early leaves the job paused, aborted or interrupted (``_stopped``); a stream
+that ends is done only if ``print_check`` finds every waypoint printed once and the ink.
+The supervisor node (``supervisor_node``) owns the state this mixin works on.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from core.errors import InputError
+from core.report import update_report
+from mesp_cell.bus.session import Bus
+from mesp_cell.drivers.stream import StreamPlan, sha256_of
+from mesp_cell.jobs import JobRecord, JobStore
+from mesp_cell.messages import (
+    Command,
+    ExtruderState,
+    JobProgress,
+    Reply,
+    RobotState,
+    StreamEvent,
+    WaypointReached,
+)
+from mesp_cell.nodes import print_ledger
+from mesp_cell.nodes.eta_estimate import EtaEstimate
+from mesp_cell.nodes.ink_at_rest import add_rest_ink, deposition_s, rest_ink
+from mesp_cell.nodes.print_check import check_print
+from mesp_cell.profiles import stale_reason
+from slicer.extrusion import ExtrusionProfile, load_job_profile
+
+log = logging.getLogger("mesp.supervisor")
+
+
+class Stopped(Exception):
+    """The print stopped early; ``args[0]`` is the reason."""
+
+
+class PrintLoop:
+    """The print of one job, mixed into ``SupervisorNode`` (which sets these attributes in
+    ``on_configure``)."""
+
+    bus: Bus | None
+    store: JobStore
+    cell: str
+    names: dict[str, str]
+    timeouts: dict[str, float]
+    setpoint: float
+    true_per_nominal: float
+    lead_s: float
+    prime_s: float
+    dt: float
+    time_scale: float
+    settle_s: float
+    alive: set[str]
+    events: queue.Queue[StreamEvent]
+    waypoints: queue.Queue[WaypointReached]
+    robot_state: RobotState | None
+    extruder_state: ExtruderState | None
+    current: str
+    request: str
+    _lock: threading.Lock
+
+    def _retract(self, job_id: str) -> str:
+        """Move home on the robot's checked safe path (retract along the nozzle axis, transfer
+        above the gel); returns what happened, for the job's history."""
+        reply = self._request(self.names["robot"], Command.make("move", job_id, to="home"))
+        if not reply.ok:
+            return f"nozzle not retracted: {reply.reason}"
+        try:
+            ev = self._wait_event(job_id, self.timeouts["move"])
+        except Stopped as exc:
+            return f"nozzle not retracted: {exc}"
+        if ev.kind != "moved":
+            return f"nozzle not retracted: {ev.reason or 'move interrupted'}"
+        return "nozzle retracted along its axis out of the gel and parked at home"
+
+    def _request(self, node: str, cmd: Command, timeout: float = 5.0) -> Reply:
+        assert self.bus is not None
+        return self.bus.request(node, cmd, timeout)
+
+    def _wait_event(self, job_id: str, timeout: float) -> StreamEvent:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            if self.names["robot"] not in self.alive:
+                raise Stopped(f"{self.names['robot']} process lost")
+            try:
+                ev = self.events.get(timeout=0.05)
+            except queue.Empty:
+                continue
+            if ev.job_id == job_id:
+                return ev
+        raise Stopped(f"robot did not finish within {timeout:g} s")
+
+    def _check_request(self) -> None:
+        """Raise ``Stopped`` if the operator paused or aborted the current job."""
+        if self.request:
+            raise Stopped(f"{self.request} requested")
+
+    def _move(self, job_id: str, **args: Any) -> None:
+        self._check_request()
+        reply = self._request(self.names["robot"], Command.make("move", job_id, **args))
+        if not reply.ok:
+            raise Stopped(reply.reason)
+        ev = self._wait_event(job_id, self.timeouts["move"])
+        if ev.kind != "moved":
+            raise Stopped(ev.reason or "move interrupted")
+
+    def _extruder(self, verb: str, **args: Any) -> None:
+        reply = self._request(self.names["extruder"], Command.make(verb, **args), 2.0)
+        if not reply.ok:
+            raise Stopped(f"extruder refused {verb}: {reply.reason}")
+
+    def _job_profile(self, job: JobRecord) -> ExtrusionProfile:
+        """The profile ``job`` was sliced with, if it is the cell's active calibration."""
+        profile = load_job_profile(Path(job.dir))
+        why = stale_reason(profile, self.cell)
+        if why:
+            raise InputError(why, "re-submit the job to slice it with the active profile, or "
+                             f"`mesp profile activate {Path(job.dir) / 'profile.toml'} --on "
+                             f"{self.cell}`")
+        return profile
+
+    def _print(self, job: JobRecord) -> None:
+        resume = job.state in ("paused", "interrupted")
+        traj = Path(job.dir) / "trajectory.npz"
+        if not traj.is_file():
+            raise InputError(f"job {job.id} has no trajectory.npz", "re-submit the job")
+        profile = self._job_profile(job)
+        self.setpoint = profile.setpoint_mm3_s
+        self.true_per_nominal = profile.rate_mm3_s / profile.setpoint_mm3_s
+        plan = StreamPlan.load(traj, self.dt)
+        digest = sha256_of(traj)
+        robot = self.names["robot"]
+        reply = self._request(robot, Command.make("load", job.id, path=str(traj), sha256=digest,
+                                                  fresh=not resume))
+        if not reply.ok:
+            raise InputError(f"pre-flight: {reply.reason}", "fix the job and re-submit it")
+        self.store.set_sizes(job.id, plan.layers, int(plan.wp_id.size), plan.samples)
+        start, after = 0, -1
+        if resume:  # right after the last waypoint the robot printed
+            after, start = self._checkpoint(job, plan)
+            start = max(start, 0)
+            if after >= 0:  # re-traced up to the stop, and the screw's lead past it
+                stop = print_ledger.read(Path(job.dir)).stop
+                self._add_rest_ink(job, deposition_s(plan, start, self.lead_s, max(stop, start)))
+        with self._lock:
+            self.current, self.request = job.id, ""
+        while not self.events.empty():
+            self.events.get_nowait()
+        self.store.transition(job.id, "printing", "resumed" if resume else "", expect=job.state)
+        ext0 = self.extruder_state.volume if self.extruder_state else 0.0
+        try:
+            if not resume:
+                self._move(job.id, to="home")
+            # the robot node moves on a checked safe path: out of the gel along the nozzle
+            # axis, above it, and into it along the target sample's axis (sample 0 is home)
+            self._move(job.id, to="sample", sample=start)
+            first = plan.first_extruding()
+            # a fault the controller latched (a watchdog left by a lost link or a killed
+            # extruder node) is acknowledged before anything streams: the robot stops even a
+            # travel move on an extruder fault
+            self._extruder("clear")
+            if start < first:
+                # the planned entry (home -> plunge to the first waypoint) deposits nothing:
+                # stream it, then lead and prime at rest at the first deposition sample
+                ev = self._stream(job, plan, ext0, start, after, end=first)
+                self._drain(job.id)
+                if ev.kind != "done":
+                    raise Stopped(ev.reason or "stream stopped")
+                start = first
+            lead_n = round(self.lead_s / self.dt)
+            # Starting acknowledges a latched watchdog/stall fault (e.g. left by a killed
+            # extruder node); an e-stop is only cleared by the operator (`mesp estop --reset`).
+            self._extruder("clear")
+            on = plan.extrude_at(min(start + lead_n, plan.samples - 1))
+            t_on = -1.0
+            if on:
+                self._extruder("start", rate=self.setpoint)
+                # Lead and prime run on the extruder's (the twin's) clock; the switch-on must
+                # also show in the extruder state (wall-clock latency) before the stream starts.
+                wait = (self.lead_s + (0.0 if resume else self.prime_s)) / self.time_scale
+                t_on = time.monotonic()
+                time.sleep(max(wait, min(self.lead_s, self.settle_s)))
+
+            def started() -> None:
+                # the screw ran at rest from its start until the robot took the stream (the
+                # request's wall time counts time_scale times over on a fast twin's clock)
+                if t_on >= 0:
+                    self._add_rest_ink(job, (time.monotonic() - t_on) * self.time_scale
+                                       - deposition_s(plan, start - 1, self.lead_s))
+
+            ev = self._stream(job, plan, ext0, start, after, started=started)
+            if ev.kind == "done":
+                self._extruder("stop")
+            self._drain(job.id)
+            if ev.kind != "done":
+                raise Stopped(ev.reason or "stream stopped")
+            self._move(job.id, to="home")
+            volume = self._volume(job, ext0)
+            self.store.progress(job.id, 100.0, 0.0, volume)
+            check = check_print(Path(job.dir), plan, volume, rest_ink(Path(job.dir)),
+                                self.setpoint * self.true_per_nominal * self.lead_s,
+                                self.true_per_nominal)
+            update_report(Path(job.dir), {"print": {
+                "cell": self.cell, "volume_mm3": volume, **check.report(),
+                "profile": {"name": profile.name, "sha256": profile.sha256,
+                            "rate_mm3_s": profile.rate_mm3_s,
+                            "setpoint_mm3_s": profile.setpoint_mm3_s,
+                            "calibrated": profile.calibrated}}})
+            if not check.ok:
+                raise InputError(check.reason, check.fix)
+            self.store.transition(job.id, "done")
+        except Stopped as exc:
+            self._stopped(job, plan, str(exc), ext0)
+        finally:
+            with self._lock:
+                self.current, self.request = "", ""
+
+    def _stream(self, job: JobRecord, plan: StreamPlan, ext0: float, start: int, after: int,
+                end: int | None = None,
+                started: Callable[[], None] | None = None) -> StreamEvent:
+        """Stream samples ``start`` .. ``end`` - 1 (to the end by default) and follow it;
+        ``started`` is called as soon as the robot took the stream."""
+        self._check_request()
+        args: dict[str, Any] = {"start": start, "after_waypoint": after, "lead_s": self.lead_s,
+                                "rate": self.setpoint}
+        if end is not None:
+            args["end"] = end
+        reply = self._request(self.names["robot"], Command.make("stream", job.id, **args))
+        if not reply.ok:
+            raise Stopped(reply.reason)
+        if started is not None:
+            started()
+        return self._monitor(job, plan, ext0)
+
+    def _checkpoint(self, job: JobRecord, plan: StreamPlan) -> tuple[int, int]:
+        """(waypoint, sample) the robot's ledger last printed (-1, -1: nothing yet), recorded
+        as the job's checkpoint."""
+        waypoint, sample = print_ledger.read(Path(job.dir)).last
+        if waypoint >= 0:
+            i = int(np.searchsorted(plan.wp_id, waypoint))
+            self.store.checkpoint(job.id, int(plan.wp_layer[i]), waypoint, sample)
+        return waypoint, sample
+
+    def _stopped(self, job: JobRecord, plan: StreamPlan, reason: str, ext0: float) -> None:
+        try:
+            self._request(self.names["extruder"], Command.make("stop"), 1.0)
+            self._request(self.names["robot"], Command.make("stop", reason=reason), 1.0)
+        finally:
+            self._drain(job.id)
+            self._checkpoint(job, plan)
+            self.store.progress(job.id, self.store.get(job.id).percent, 0.0,
+                                self._volume(job, ext0))
+            req = self.request
+            if req == "pause":
+                self.store.transition(job.id, "paused", "paused by the operator")
+            elif req == "abort":  # aborted once out of the gel (or why it could not be)
+                self.store.transition(job.id, "aborted",
+                                      f"aborted by the operator; {self._retract(job.id)}")
+            else:
+                self.store.transition(job.id, "interrupted", reason)
+            log.warning("job %s stopped: %s", job.id, reason)
+            # the screw delivers a little more after the stop: counted before the job goes on
+            self._settle_screw()
+            self.store.progress(job.id, self.store.get(job.id).percent, 0.0,
+                                self._volume(job, ext0))
+
+    def _settle_screw(self, timeout: float = 5.0) -> None:
+        """Wait until a fresh extruder state shows the screw at rest: it keeps delivering
+        (its flow response) after a stop, and a killed extruder node comes back within the
+        timeout; the job's volume then holds that ink too."""
+        asked = time.time()
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            ext = self.extruder_state
+            if (ext is not None and ext.t > asked and ext.connected and not ext.running
+                    and abs(ext.rate) <= 0.01 * max(self.setpoint, 1e-9)):
+                return
+            time.sleep(0.02)
+        log.warning("the screw did not show at rest within %g s; the job's volume may miss "
+                    "its last ink", timeout)
+
+    def _volume(self, job: JobRecord, ext0: float) -> float:
+        """mm^3 extruded: the controller's totaliser (nominal) times the profile's C per
+        set-point (what weighing found it really delivers)."""
+        now = self.extruder_state.volume if self.extruder_state else ext0
+        return job.volume + max(0.0, now - ext0) * self.true_per_nominal
+
+    def _drain(self, job_id: str) -> None:
+        """Record the waypoints still queued (they may trail the stream's end event)."""
+        time.sleep(0.05)
+        last: WaypointReached | None = None
+        while not self.waypoints.empty():
+            wp = self.waypoints.get_nowait()
+            if wp.job_id == job_id:
+                last = wp
+        if last is not None:
+            self.store.checkpoint(job_id, last.layer, last.waypoint, last.sample)
+
+    def _lost_end(self, job_id: str, asked: float) -> StreamEvent | None:
+        """The end of ``job_id``'s stream if its event was lost on the bus: the robot's state
+        shows it not streaming well after the stream was asked for (``asked``, s since the
+        epoch); its ``status`` then says how it ended."""
+        rs = self.robot_state
+        if (rs is None or rs.t < asked + 1.0 or rs.job_id != job_id
+                or rs.mode not in ("idle", "stopped")):
+            return None
+        reply = self._request(self.names["robot"], Command.make("status"), 1.0)
+        if not reply.ok or reply.value("mode") not in ("idle", "stopped"):
+            return None
+        log.warning("the end of the stream of %s did not arrive; the robot is %s", job_id,
+                    reply.value("mode"))
+        why = str(reply.value("stop_reason", ""))
+        return StreamEvent(job_id, "done" if reply.value("mode") == "idle" else "stopped",
+                           why, rs.sample, float(reply.value("stop_t", time.time())))
+
+    def _monitor(self, job: JobRecord, plan: StreamPlan, ext0: float) -> StreamEvent:
+        """Follow the stream (checkpoints, progress) until it ends. The robot node switches
+        the extruder on the servo clock."""
+        assert self.bus is not None
+        K = plan.samples
+        last_report = 0.0
+        eta_of = EtaEstimate(self.time_scale / self.dt)
+        layer = max(job.layer, 0)
+        wp_last = job.waypoint
+        asked = time.time()
+        while True:
+            if self.names["robot"] not in self.alive:
+                raise Stopped(f"{self.names['robot']} process lost")
+            lost = self._lost_end(job.id, asked)
+            if lost is not None:
+                return lost
+            if self.names["extruder"] not in self.alive:
+                self._request(self.names["robot"], Command.make("stop", reason="extruder lost"),
+                              1.0)
+            if self.request:
+                self._request(self.names["robot"], Command.make("stop", reason=self.request),
+                              1.0)
+            try:
+                ev = self.events.get(timeout=0.01)
+                if ev.job_id == job.id and ev.kind in ("done", "stopped"):
+                    return ev
+            except queue.Empty:
+                pass
+            last: WaypointReached | None = None
+            while not self.waypoints.empty():
+                wp = self.waypoints.get_nowait()
+                if wp.job_id == job.id:
+                    last = wp
+            if last is not None:
+                self.store.checkpoint(job.id, last.layer, last.waypoint, last.sample)
+                layer, wp_last = max(last.layer, 0), last.waypoint
+            rs = self.robot_state
+            s = rs.sample if rs is not None and rs.job_id == job.id else -1
+            now = time.monotonic()
+            if now - last_report > 0.2 and s >= 0:
+                last_report = now
+                percent = 100.0 * (s + 1) / K
+                eta = eta_of(now, s, K - 1 - s)
+                vol = self._volume(job, ext0)
+                self.store.progress(job.id, percent, eta, vol)
+                self.bus.publish("progress", JobProgress(
+                    job.id, "printing", layer, plan.layers, wp_last, int(plan.wp_id.size),
+                    percent, eta, vol, time.time()))
+
+    def _add_rest_ink(self, job: JobRecord, seconds: float) -> None:
+        """Add ``seconds`` of the extruder's clock at the set-point to the job's ink at rest."""
+        add_rest_ink(Path(job.dir), self.setpoint * self.true_per_nominal * seconds)
