@@ -7,6 +7,10 @@ connectors and blends included), the contour width error p50/p90 and the chosen 
 volume error (deposited / integral of H - 1). Usage:
 
     .venv/bin/python bench/contour_coverage.py JOBDIR ... [--step 2] [--out FILE.json]
+        [--figure LAYER --png FILE.png]
+
+``--figure LAYER`` draws that layer of the first job both ways: the coverage samples
+coloured bare (red) / once (grey) / covered twice (blue) under the extruding path.
 """
 
 from __future__ import annotations
@@ -26,7 +30,14 @@ from core.stages import Layers, Pattern
 from slicer.config import load_job
 from slicer.extrusion import load_profile
 from slicer.toolpath.build import assemble
-from slicer.toolpath.coverage import layer_coverage
+from slicer.toolpath.coverage import (
+    SAMPLES_PER_W2,
+    _covered_pairs,
+    _passes,
+    _sample_layer,
+    _segments,
+    layer_coverage,
+)
 from slicer.toolpath.layer_build import layer_pattern, layer_toolpath, split_layers
 
 MODES = (("connectors", False), ("spiral", True))
@@ -70,6 +81,51 @@ def measure(job_dir: Path, step: int, spiral: bool) -> dict[str, Any]:
     }
 
 
+def figure(job_dir: Path, layer: int, png: Path) -> None:
+    """One layer's coverage with connectors and as a spiral, side by side."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    job = load_job(job_dir / "job.toml")
+    profile = load_profile(job.extrusion.profile)
+    layers = Layers.load(job_dir)
+    mesh = split_layers(layers)[layer]
+    tri = mesh.vertices[mesh.faces]
+    area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]),
+                                      axis=1).sum())
+    # the layer's best-fit plane as the drawing plane
+    centre = mesh.vertices.mean(axis=0)
+    axes = np.linalg.svd(mesh.vertices - centre, full_matrices=False)[2][:2]
+    fig, panels = plt.subplots(1, 2, figsize=(12, 6))
+    for ax, (name, spiral) in zip(panels, MODES, strict=True):
+        cfg = job.with_overrides(toolpath={"spiral_rings": spiral}).toolpath
+        res = layer_toolpath(mesh, layer_pattern(mesh.index, cfg.first_pattern), cfg, profile,
+                             False)
+        tp, _ = assemble([res])
+        seg = _segments(tp, np.arange(len(tp.path)))
+        w = 2.0 * float(np.median(seg.half_width))
+        count = int(min(4 * SAMPLES_PER_W2 * area / w**2, 40_000))
+        points, normal = _sample_layer(mesh.vertices, mesh.faces.astype(np.int64), count,
+                                       np.random.default_rng(1))
+        i, j = _covered_pairs(points, normal, seg)
+        passes = _passes(count, i, j, seg, 2.0 * w)
+        xy = (points - centre) @ axes.T
+        colour = np.where(passes == 0, "red", np.where(passes == 1, "0.85", "tab:blue"))
+        ax.scatter(xy[:, 0], xy[:, 1], c=colour, s=2, linewidths=0)
+        path = (np.asarray(tp.position) - centre) @ axes.T
+        ext = np.asarray(tp.extrude)
+        ax.plot(np.where(ext, path[:, 0], np.nan), np.where(ext, path[:, 1], np.nan), "k-",
+                lw=0.6)
+        ax.set_title(f"{job_dir.name} layer {layer}, {name}: bare {100 * np.mean(passes == 0):.1f}"
+                     f" %, twice {100 * np.mean(passes >= 2):.1f} %")
+        ax.set_aspect("equal")
+        ax.set_xlabel("mm")
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+
+
 def _pct(x: float | None) -> str:
     return "/" if x is None else f"{100.0 * x:.1f}"
 
@@ -79,7 +135,12 @@ def main() -> None:
     ap.add_argument("jobs", nargs="+", type=Path, help="sliced job directories")
     ap.add_argument("--step", type=int, default=2, help="every STEP-th contour layer")
     ap.add_argument("--out", type=Path, help="write every number as JSON")
+    ap.add_argument("--figure", type=int, help="draw this layer of the first job instead")
+    ap.add_argument("--png", type=Path, default=Path("contour_coverage.png"))
     args = ap.parse_args()
+    if args.figure is not None:
+        figure(args.jobs[0], args.figure, args.png)
+        return
     out: dict[str, Any] = {}
     for job_dir in args.jobs:
         for name, spiral in MODES:

@@ -16,6 +16,8 @@ closer to the layer than ``lift``), and plunges onto the next line's start. Trav
 carry extrude=False and a path id of their own; a segment deposits iff both its ends extrude
 and share a path id. Where joins up to 3 W keep a component's volume match from converging,
 ``build`` links it again with 2 W joins and keeps the better match.
+Contour rings joined this way are blended into a spiral instead (``spiral.py``, config
+``spiral_rings``): a straight step across lies over both rings.
 ``Joiner`` computes each connector once: the stripe ordering asks it which line ends can be
 joined (``ordering._order_cover``) and the linking reuses the answers.
 """

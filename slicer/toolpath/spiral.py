@@ -15,7 +15,11 @@ Only the ends of the spiral leave a wedge: the first ring's sector starts lambda
 its start (half of the wedge covered twice, half left bare instead of all of it one way),
 and the last ring of a component stops lambda / 2 before its footprint ends.
 The first blend is BLEND x W long (at most MAX_SHARE of its ring); the next ones are the
-footprints, so the sector keeps its angle across a disc's rings.
+footprints, so the sector keeps its angle across a disc's rings. The innermost ring stops
+short of the distance peak; where it leaves a bare spot (round ring) or strip (elongated
+ring) inside it, a line along its ridge covers it (``SpiralPlanner.centre``), and a last loop
+narrower than W around that ridge is left out for it. Only on components with one boundary
+loop (eq. 9's rings of a disc): a band between two boundaries keeps its connectors.
 """
 
 from __future__ import annotations
@@ -32,12 +36,14 @@ from core.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.mapback import barycentric
 from slicer.toolpath.ordering import Piece
+from slicer.toolpath.surface import boundary_loops
 
 BLEND = 3.0  # first blend's arc length, x W: the path turns by atan(1 / BLEND) ~ 18 deg
 MAX_SHARE = 0.5  # a blend spans at most this share of its ring
 NEAREST_FACES = 12  # faces (by centroid) tried when projecting a blended point
 CENTRE_BARE = 0.4  # the innermost ring gets a line into its centre where it leaves a bare
 # spot wider than this x W in radius (the line covers about pi rho^2, lies over W^2 / 2)
+RIDGE_CLEAR = 0.4  # ... along a ridge whose every point is at least this x W from the ring
 
 
 class Blend(NamedTuple):
@@ -168,39 +174,60 @@ class SpiralPlanner:
         flat = pa.idx[pa.s < start - tol.merge]
         return Run(flat, a.line, tail, True), Piece(b_idx, b.line), footprint
 
-    def centre(self, ring: NDArray[np.int64], end: int) -> Blend | None:
-        """A line from point ``end`` of the innermost ``ring`` through the ring's centre and
-        on past it by the bare radius, or None: where the ring (roughly round: its nearest
-        point at least half as far from its centroid as its farthest) leaves a bare spot of
-        radius rho = (nearest distance - W / 2) > CENTRE_BARE x W inside it, the W-wide line
-        covers it (its far end stops where the ring's band begins)."""
+    def centre(self, ring: NDArray[np.int64], end: int, force: bool = False) -> Blend | None:
+        """A line from point ``end`` of the innermost ``ring`` along the ring's ridge, or
+        None. The ridge: the ring's principal axis through its centroid, stopping a
+        half-width h (the centroid's distance to the ring) short of the ring's extent each
+        way (a point on a round ring's centre, a segment on an elongated one). Where the ring
+        leaves a bare strip rho = h - W / 2 > CENTRE_BARE x W wide, the W-wide line runs
+        along the ridge and on past each end by rho, so it covers the strip and stops where
+        the ring's band begins; not where it would cross the ring's band (no convex ring).
+        ``force``: wherever anything is bare (rho > 0; the ring's thin inner loop is left
+        out)."""
         pts = self.lines.points[ring]
         step = np.linalg.norm(np.diff(pts, axis=0), axis=1)
         mid = 0.5 * (pts[1:] + pts[:-1])
         c = self.project((mid * step[:, None]).sum(axis=0)[None] / max(step.sum(), tol.zero))
         centre = c.points[0]
-        dist = np.linalg.norm(pts - centre, axis=1)
         w = float(np.mean(self.width[ring]))
-        rho = float(dist.min()) - 0.5 * w
-        if rho <= CENTRE_BARE * w or dist.min() < 0.5 * dist.max():
+        half = float(np.linalg.norm(pts - centre, axis=1).min())
+        rho = half - 0.5 * w
+        if rho <= (0.0 if force else CENTRE_BARE * w):
             return None
+        axis = np.linalg.svd(pts - centre, full_matrices=False)[2][0]
+        t = (pts - centre) @ axis
+        lo, hi = min(t.min() + half, 0.0) - rho, max(t.max() - half, 0.0) + rho
         p0 = self.lines.points[end]
-        ahead = centre - p0
-        far = centre + rho * ahead / max(float(np.linalg.norm(ahead)), tol.zero)
-        length = float(np.linalg.norm(far - p0))
-        m = max(int(np.ceil(length / max(float(np.median(step)), tol.merge))), 2)
-        t = (np.arange(m) + 1.0) / m
-        return self.project(p0 + t[:, None] * (far - p0))
+        ends = centre + np.outer([lo, hi], axis)
+        if np.linalg.norm(ends[1] - p0) < np.linalg.norm(ends[0] - p0):
+            ends = ends[::-1]
+        spacing = max(float(np.median(step)), tol.merge)
+        legs = []
+        for a, b in ((p0, ends[0]), (ends[0], ends[1])):
+            m = max(int(np.ceil(float(np.linalg.norm(b - a)) / spacing)), 2)
+            legs.append(a + ((np.arange(m) + 1.0) / m)[:, None] * (b - a))
+        ridge = legs[1]
+        # the ridge keeps clear of the ring's band (else the ring is not convex there)
+        if float(cKDTree(pts).query(ridge)[0].min()) < RIDGE_CLEAR * w:
+            return None
+        return self.project(np.concatenate(legs))
 
-    def shortened(self, a: Piece, footprint: float | None) -> Run:
+    def thin(self, ring: Piece) -> bool:
+        """Whether a ring encloses no strip wider than W: its centroid lies within W / 2
+        of it (a loop around the ridge at a layer's centre)."""
+        pts = self.lines.points[ring.points]
+        w = float(np.mean(self.width[ring.points]))
+        return float(np.linalg.norm(pts - pts.mean(axis=0), axis=1).min()) < 0.5 * w
+
+    def shortened(self, a: Piece, footprint: float | None, force: bool = False) -> Run:
         """The last ring of a component: stopped half its footprint before its end when a
         blend arrived at it, then the line into its centre where it leaves a bare spot."""
         idx = np.asarray(a.points, dtype=np.int64)
         if footprint is not None:
             pa = _unroll(self.lines.points, idx)
             idx = idx[pa.s[: len(idx)] < pa.length - 0.5 * footprint]
-        return Run(idx, a.line, self.centre(np.asarray(a.points, dtype=np.int64), int(idx[-1])),
-                   False)
+        ring = np.asarray(a.points, dtype=np.int64)
+        return Run(idx, a.line, self.centre(ring, int(idx[-1]), force), False)
 
 
 def spiral_runs(planner: SpiralPlanner, pieces: list[Piece],
@@ -212,8 +239,20 @@ def spiral_runs(planner: SpiralPlanner, pieces: list[Piece],
     blend half a blend before its start, the last stops half a footprint early when it ends
     the component.
     """
+    if len(boundary_loops(planner.faces)) != 1 or not all(_is_ring(p) for p in pieces):
+        # a band between two boundaries (fitted contours: where its line count changes the
+        # rings' ink falls short and the connectors made it up, so blending pulled tau down
+        # and the width error up, docs/benchmarks.md session 17), or an open line
+        return [Run(np.asarray(p.points, dtype=np.int64), p.line, None, False) for p in pieces]
     runs: list[Run] = []
     pieces = list(pieces)
+    force = (len(pieces) >= 2 and planner.thin(pieces[-1])
+             and planner.centre(np.asarray(pieces[-2].points, dtype=np.int64),
+                                int(pieces[-2].points[-1]), True) is not None)
+    if force:
+        # a loop around a ridge narrower than W: the ridge line of the ring around it
+        # covers it instead (``centre``)
+        pieces = pieces[:-1]
     footprint: float | None = None  # the blend that arrived at the current piece
     for k, piece in enumerate(pieces):
         nxt = pieces[k + 1] if k + 1 < len(pieces) else None
@@ -229,7 +268,7 @@ def spiral_runs(planner: SpiralPlanner, pieces: list[Piece],
             runs.append(run)
             continue
         if nxt is None and _is_ring(piece):
-            runs.append(planner.shortened(piece, footprint))
+            runs.append(planner.shortened(piece, footprint, force))
         else:
             runs.append(Run(np.asarray(piece.points, dtype=np.int64), piece.line, None, False))
         footprint = None

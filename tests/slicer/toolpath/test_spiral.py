@@ -18,12 +18,12 @@ def _flat(v: np.ndarray, f: np.ndarray) -> Layers:
                   np.tile([0.0, 0.0, 1.0], (len(v), 1)))
 
 
-@pytest.mark.parametrize("inner", [0.0, 6.0])
-def test_spiral_covers_a_disc_and_an_annulus_once(inner: float) -> None:
-    # a 20 mm disc (8 rings at W = 2.33 mm) and a 10 mm band around a 6 mm hole: joined by
-    # connectors each ring's seam is covered twice (about W x W) and the volume match
-    # spreads the rings to pay for it; as one spiral neither happens
-    layers = _flat(*disc_mesh(20.0, 0.8, inner=inner))
+@pytest.mark.parametrize("radius", [20.0, 16.0])
+def test_spiral_covers_a_disc_once(radius: float) -> None:
+    # discs of 8 and 6 rings at W = 2.33 mm: joined by connectors each ring's seam is
+    # covered twice (about W x W) and the volume match spreads the rings to pay for it; as
+    # one spiral neither happens
+    layers = _flat(*disc_mesh(radius, 0.8))
     out = {}
     for spiral in (False, True):
         job = JobConfig().with_overrides(toolpath={"spiral_rings": spiral})
@@ -36,6 +36,14 @@ def test_spiral_covers_a_disc_and_an_annulus_once(inner: float) -> None:
     assert gap <= 0.03 and overlap <= 0.03
     assert gap + overlap < 0.6 * (out[False][0] + out[False][1])
     assert p90 <= out[False][2]
+
+
+def test_a_band_between_two_boundaries_keeps_its_connectors() -> None:
+    layers = _flat(*disc_mesh(16.0, 0.8, inner=6.0))
+    tps = [compute_toolpath(layers, JobConfig().with_overrides(toolpath={"spiral_rings": s}),
+                            PROFILE, measure_baselines=False, workers=1).toolpath
+           for s in (False, True)]
+    assert np.array_equal(tps[0].position, tps[1].position)
 
 
 def test_blends_stay_on_a_curved_layer() -> None:
