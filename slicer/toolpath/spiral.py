@@ -14,12 +14,13 @@ rings run side by side one ring spacing apart, as everywhere else, and no ink li
 Only the ends of the spiral leave a wedge: the first ring's sector starts lambda / 2 before
 its start (half of the wedge covered twice, half left bare instead of all of it one way),
 and the last ring of a component stops lambda / 2 before its footprint ends.
-The first blend is BLEND x W long (at most MAX_SHARE of its ring); the next ones are the
-footprints, so the sector keeps its angle across a disc's rings. The innermost ring stops
-short of the distance peak; where it leaves a bare spot (round ring) or strip (elongated
-ring) inside it, a line along its ridge covers it (``SpiralPlanner.centre``), and a last loop
-narrower than W around that ridge is left out for it. Only on components with one boundary
-loop (eq. 9's rings of a disc): a band between two boundaries keeps its connectors.
+The first blend is 1-4 W long, longer on larger rings (``first_blend``; at most MAX_SHARE
+of its ring); the next ones are the footprints, so the sector keeps its angle across a
+disc's rings. The innermost ring of a spiral stops short of the distance peak; where it
+leaves a bare spot (round ring) or strip (elongated ring) inside it, a line along its ridge
+covers it (``SpiralPlanner.centre``), and a last loop narrower than W around that ridge is
+left out for it. Only on components with one boundary loop (eq. 9's rings of a disc): a
+band between two boundaries keeps its connectors.
 """
 
 from __future__ import annotations
@@ -38,7 +39,7 @@ from slicer.toolpath.mapback import barycentric
 from slicer.toolpath.ordering import Piece
 from slicer.toolpath.surface import boundary_loops
 
-BLEND = 3.0  # first blend's arc length, x W: the path turns by atan(1 / BLEND) ~ 18 deg
+BLEND_RANGE = (1.0, 4.0)  # first blend's arc length, x W (``SpiralPlanner.first_blend``)
 MAX_SHARE = 0.5  # a blend spans at most this share of its ring
 NEAREST_FACES = 12  # faces (by centroid) tried when projecting a blended point
 CENTRE_BARE = 0.4  # the innermost ring gets a line into its centre where it leaves a bare
@@ -212,17 +213,38 @@ class SpiralPlanner:
             return None
         return self.project(np.concatenate(legs))
 
+    def first_blend(self, ring: Piece) -> float:
+        """The first blend's length, mm: W sqrt(K max(ln K, 1)) within BLEND_RANGE x W, for
+        K = L / (2 pi W) rings inside a ring of length L. The spiral's end wedges grow with
+        the blend (about lambda x W / 2 bare or covered twice), the steepness of the K
+        blends inside falls with it (their spacing s cos(atan(s / lambda_k)), lambda_k
+        shrinking with the rings): the sum is least near this length."""
+        w = float(np.mean(self.width[ring.points]))
+        length = float(np.linalg.norm(np.diff(self.lines.points[ring.points], axis=0),
+                                      axis=1).sum())
+        k = max(length / (2.0 * np.pi * max(w, tol.merge)), 1.0)
+        return float(np.clip(np.sqrt(k * max(np.log(k), 1.0)), *BLEND_RANGE)) * w
+
     def thin(self, ring: Piece) -> bool:
-        """Whether a ring encloses no strip wider than W: its centroid lies within W / 2
-        of it (a loop around the ridge at a layer's centre)."""
+        """Whether a ring is a thin loop around a ridge: its centroid lies within W / 2 of
+        it and it is at least 2 W long across (a round one stays: it covers more)."""
         pts = self.lines.points[ring.points]
         w = float(np.mean(self.width[ring.points]))
-        return float(np.linalg.norm(pts - pts.mean(axis=0), axis=1).min()) < 0.5 * w
+        centred = pts - pts.mean(axis=0)
+        if float(np.linalg.norm(centred, axis=1).min()) >= 0.5 * w:
+            return False
+        axis = np.linalg.svd(centred, full_matrices=False)[2][0]
+        return float(np.ptp(centred @ axis)) >= 2.0 * w
 
     def shortened(self, a: Piece, footprint: float | None, force: bool = False) -> Run:
-        """The last ring of a component: stopped half its footprint before its end when a
-        blend arrived at it, then the line into its centre where it leaves a bare spot."""
+        """The last ring of a spiral (a blend arrived at it, ``footprint`` mm): stopped half
+        its footprint before its end, then the line along its ridge where it leaves a bare
+        spot. A lone ring (no footprint, not ``force``) is printed whole, as it was: on the
+        tips of a part (a ring or two across) the line's ink spread the ring outwards and
+        doubled the width error where the flow fit had kept it."""
         idx = np.asarray(a.points, dtype=np.int64)
+        if footprint is None and not force:
+            return Run(idx, a.line, None, False)
         if footprint is not None:
             pa = _unroll(self.lines.points, idx)
             idx = idx[pa.s[: len(idx)] < pa.length - 0.5 * footprint]
@@ -259,8 +281,7 @@ def spiral_runs(planner: SpiralPlanner, pieces: list[Piece],
         done = None
         if (nxt is not None and _is_ring(piece) and _is_ring(nxt)
                 and can_join(int(piece.points[-1]), int(nxt.points[0]))):
-            w = float(np.mean(planner.width[piece.points]))
-            lam = BLEND * w if footprint is None else footprint
+            lam = planner.first_blend(piece) if footprint is None else footprint
             extra = 0.5 * lam if footprint is None else 0.0
             done = planner.blend(piece, lam, extra, nxt)
         if done is not None:
