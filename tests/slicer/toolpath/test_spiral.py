@@ -38,6 +38,22 @@ def test_spiral_covers_a_disc_once(radius: float) -> None:
     assert p90 <= out[False][2]
 
 
+def test_an_elongated_layer_gets_its_ridge_covered() -> None:
+    # a 32 x 20 mm ellipse: the innermost ring is a long loop around the ridge, whose
+    # inside the rings leave bare; the spiral ends with a line along the ridge
+    v, f = disc_mesh(10.0, 0.5)
+    layers = _flat(v * np.array([1.6, 1.0, 1.0]), f)
+    out = {}
+    for spiral in (False, True):
+        job = JobConfig().with_overrides(toolpath={"spiral_rings": spiral})
+        res = compute_toolpath(layers, job, PROFILE, measure_baselines=False, workers=1)
+        assert abs(res.report["layer_volume_error"]) < 0.01
+        cov = layer_coverage(layers, res.toolpath)
+        out[spiral] = (cov.gap[0], cov.overlap[0])
+    assert max(out[True]) <= 0.03
+    assert sum(out[True]) < sum(out[False])
+
+
 def test_a_band_between_two_boundaries_keeps_its_connectors() -> None:
     layers = _flat(*disc_mesh(16.0, 0.8, inner=6.0))
     tps = [compute_toolpath(layers, JobConfig().with_overrides(toolpath={"spiral_rings": s}),
