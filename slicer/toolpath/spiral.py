@@ -132,6 +132,7 @@ class SpiralPlanner:
         cand = np.asarray(cand).reshape(len(p), k)
         closest = trimesh.triangles.closest_point(tri[cand.ravel()], np.repeat(p, k, axis=0))
         d = np.linalg.norm(closest - np.repeat(p, k, axis=0), axis=1).reshape(len(p), k)
+        d = np.where(np.isfinite(d), d, np.inf)  # a degenerate triangle (marching tets)
         best = np.argmin(d, axis=1)
         face = cand[np.arange(len(p)), best].astype(np.int32)
         q = closest.reshape(len(p), k, 3)[np.arange(len(p)), best]
