@@ -197,7 +197,7 @@ class SpiralPlanner:
                            np.linspace(uv[:, 1].min(), uv[:, 1].max(), RIDGE_GRID[1]))
         cand = np.column_stack([u.ravel(), v.ravel()])
         tree = cKDTree(uv)
-        depth = np.where(_inside(cand, uv), tree.query(cand)[0], 0.0)
+        depth = np.where(inside_polygon(cand, uv), tree.query(cand)[0], 0.0)
         best = int(np.argmax(depth))
         half = float(depth[best])
         rho = half - 0.5 * w
@@ -263,7 +263,7 @@ class SpiralPlanner:
         return Run(idx, a.line, self.centre(ring, int(idx[-1]), force), False)
 
 
-def _inside(points: NDArray[np.float64], polygon: NDArray[np.float64]) -> NDArray[np.bool_]:
+def inside_polygon(points: NDArray[np.float64], polygon: NDArray[np.float64]) -> NDArray[np.bool_]:
     """(k,) bool, which of ``points`` ((k, 2)) lie inside the closed ``polygon`` ((n, 2),
     its last point joined to its first): crossing number, vectorised over points x edges."""
     a, b = polygon, np.roll(polygon, -1, axis=0)

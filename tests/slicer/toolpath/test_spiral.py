@@ -9,6 +9,7 @@ from core.stages import Layers, Pattern
 from slicer.config import JobConfig
 from slicer.toolpath.build import compute_toolpath
 from slicer.toolpath.coverage import layer_coverage
+from slicer.toolpath.spiral import inside_polygon
 
 from .test_build import PROFILE, cap_stack, disc_mesh
 
@@ -73,3 +74,10 @@ def test_blends_stay_on_a_curved_layer() -> None:
     cov = layer_coverage(layers, tp)
     assert cov.gap[0] <= 0.03 and cov.overlap[0] <= 0.03
     assert res.report["extrusion_starts"]["total"] == 1
+
+
+def test_inside_a_polygon_with_a_notch() -> None:
+    # a 4 x 4 square with a 2 x 2 notch cut from the top right corner
+    poly = np.array([[0, 0], [4, 0], [4, 2], [2, 2], [2, 4], [0, 4]], dtype=np.float64)
+    pts = np.array([[1, 1], [3, 1], [1, 3], [3, 3], [5, 1], [-1, 2]], dtype=np.float64)
+    assert inside_polygon(pts, poly).tolist() == [True, True, True, False, False, False]
