@@ -18,7 +18,7 @@ The first blend is 1-4 W long, longer on larger rings (``first_blend``; at most 
 of its ring); the next ones are the footprints, so the sector keeps its angle across a
 disc's rings. The innermost ring of a spiral stops short of the distance peak; where it
 leaves a bare spot (round ring) or strip (elongated ring) inside it, a line along its ridge
-covers it (``SpiralPlanner.centre``), and a last loop narrower than W around that ridge is
+covers it (``ridge.py``), and a last loop narrower than W around that ridge is
 left out for it. Only on components with one boundary loop (eq. 9's rings of a disc): a
 band between two boundaries keeps its connectors.
 """
@@ -37,15 +37,12 @@ from core.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.mapback import barycentric
 from slicer.toolpath.ordering import Piece
+from slicer.toolpath.ridge import ridge_line
 from slicer.toolpath.surface import boundary_loops
 
 BLEND_RANGE = (1.0, 4.0)  # first blend's arc length, x W (``SpiralPlanner.first_blend``)
 MAX_SHARE = 0.5  # a blend spans at most this share of its ring
 NEAREST_FACES = 12  # faces (by centroid) tried when projecting a blended point
-CENTRE_BARE = 0.4  # the innermost ring gets a line into its centre where it leaves a bare
-# spot wider than this x W in radius (the line covers about pi rho^2, lies over W^2 / 2)
-RIDGE_CLEAR = 0.75  # ... along its ridge while at least this x W from the ring
-RIDGE_GRID = (25, 11)  # points along x across the ring searched for its deepest point
 
 
 class Blend(NamedTuple):
@@ -178,55 +175,11 @@ class SpiralPlanner:
         return Run(flat, a.line, tail, True), Piece(b_idx, b.line), footprint
 
     def centre(self, ring: NDArray[np.int64], end: int, force: bool = False) -> Blend | None:
-        """A line from point ``end`` of the innermost ``ring`` along the ring's ridge, or
-        None. In the plane of the ring's two principal axes, the point inside it farthest
-        from it (half-width h, on a RIDGE_GRID grid) and the parallel to the long axis
-        through it, stopping h short of the ring's extent each way (a point on a round ring,
-        a segment on an elongated one). Where the ring leaves a bare strip rho = h - W / 2 >
-        CENTRE_BARE x W wide, the W-wide line runs along that ridge and on past each end by
-        rho, so it covers the strip and stops where the ring's band begins, and sooner where
-        it would come within RIDGE_CLEAR x W of the ring (a tapering end). ``force``: wherever
-        anything is bare (rho > 0; the ring's thin inner loop is left out)."""
+        """The line from point ``end`` of the innermost ``ring`` along its ridge, on the
+        layer (``ridge.ridge_line``), or None."""
         pts = self.lines.points[ring]
-        step = np.linalg.norm(np.diff(pts, axis=0), axis=1)
-        w = float(np.mean(self.width[ring]))
-        origin = pts.mean(axis=0)
-        frame = np.linalg.svd(pts - origin, full_matrices=False)[2][:2]
-        uv = (pts - origin) @ frame.T
-        u, v = np.meshgrid(np.linspace(uv[:, 0].min(), uv[:, 0].max(), RIDGE_GRID[0]),
-                           np.linspace(uv[:, 1].min(), uv[:, 1].max(), RIDGE_GRID[1]))
-        cand = np.column_stack([u.ravel(), v.ravel()])
-        tree = cKDTree(uv)
-        depth = np.where(inside_polygon(cand, uv), tree.query(cand)[0], 0.0)
-        best = int(np.argmax(depth))
-        half = float(depth[best])
-        rho = half - 0.5 * w
-        if rho <= (0.0 if force else CENTRE_BARE * w):
-            return None
-        mid, side = cand[best]
-        lo = min(uv[:, 0].min() + half, mid) - rho
-        hi = max(uv[:, 0].max() - half, mid) + rho
-        spacing = max(float(np.median(step)), tol.merge)
-        along = np.linspace(lo, hi, max(int(np.ceil((hi - lo) / spacing)), 1) + 1)
-        ridge = np.column_stack([along, np.full(len(along), side)])
-        # the ridge ends where it comes within RIDGE_CLEAR x W of the ring (a tapering end,
-        # or where the ring is not convex): the run of it around the deepest point
-        clear = tree.query(ridge)[0] >= RIDGE_CLEAR * w
-        at = int(np.argmin(np.abs(along - mid)))
-        if not clear[at]:
-            return None
-        breaks = np.flatnonzero(~clear)
-        first = int(breaks[breaks < at].max()) + 1 if np.any(breaks < at) else 0
-        last = int(breaks[breaks > at].min()) if np.any(breaks > at) else len(ridge)
-        if last - first < 2:
-            return None
-        ridge3 = origin + ridge[first:last] @ frame
-        p0 = self.lines.points[end]
-        if np.linalg.norm(ridge3[-1] - p0) < np.linalg.norm(ridge3[0] - p0):
-            ridge3 = ridge3[::-1]
-        m = max(int(np.ceil(float(np.linalg.norm(ridge3[0] - p0)) / spacing)), 1)
-        lead = p0 + ((np.arange(m) + 1.0) / m)[:, None] * (ridge3[0] - p0)
-        return self.project(np.concatenate([lead, ridge3[1:]]))
+        line = ridge_line(pts, float(np.mean(self.width[ring])), self.lines.points[end], force)
+        return None if line is None else self.project(line)
 
     def first_blend(self, ring: Piece) -> float:
         """The first blend's length, mm: W sqrt(K max(ln K, 1)) within BLEND_RANGE x W, for
@@ -261,17 +214,6 @@ class SpiralPlanner:
             idx = idx[pa.s[: len(idx)] < pa.length - 0.5 * footprint]
         ring = np.asarray(a.points, dtype=np.int64)
         return Run(idx, a.line, self.centre(ring, int(idx[-1]), force), False)
-
-
-def inside_polygon(points: NDArray[np.float64], polygon: NDArray[np.float64]) -> NDArray[np.bool_]:
-    """(k,) bool, which of ``points`` ((k, 2)) lie inside the closed ``polygon`` ((n, 2),
-    its last point joined to its first): crossing number, vectorised over points x edges."""
-    a, b = polygon, np.roll(polygon, -1, axis=0)
-    py = points[:, 1:2]
-    span = (a[None, :, 1] > py) != (b[None, :, 1] > py)
-    dy = np.where(np.abs(b[:, 1] - a[:, 1]) > tol.zero, b[:, 1] - a[:, 1], tol.zero)
-    x_cross = a[None, :, 0] + (py - a[None, :, 1]) * ((b[:, 0] - a[:, 0]) / dy)[None, :]
-    return np.asarray(np.count_nonzero(span & (points[:, 0:1] < x_cross), axis=1) % 2 == 1)
 
 
 def spiral_runs(planner: SpiralPlanner, pieces: list[Piece],

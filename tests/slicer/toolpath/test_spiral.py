@@ -9,7 +9,7 @@ from core.stages import Layers, Pattern
 from slicer.config import JobConfig
 from slicer.toolpath.build import compute_toolpath
 from slicer.toolpath.coverage import layer_coverage
-from slicer.toolpath.spiral import inside_polygon
+from slicer.toolpath.ridge import inside_polygon
 
 from .test_build import PROFILE, cap_stack, disc_mesh
 
