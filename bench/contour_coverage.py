@@ -123,7 +123,7 @@ def figure(job_dir: Path, layer: int, png: Path) -> None:
         ax.set_aspect("equal")
         ax.set_xlabel("mm")
     fig.tight_layout()
-    fig.savefig(png, dpi=110)
+    fig.savefig(png, dpi=80)
 
 
 def _pct(x: float | None) -> str:
