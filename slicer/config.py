@@ -177,6 +177,7 @@ class ToolpathConfig:
     volume_tolerance: float = _JOB["toolpath"]["volume_tolerance"]
     min_path_length_mm: float = _JOB["toolpath"]["min_path_length_mm"]
     join_factor: float = _JOB["toolpath"]["join_factor"]
+    spiral_rings: bool = _JOB["toolpath"]["spiral_rings"]
     fit_bands: bool = _JOB["toolpath"]["fit_bands"]
     pitch_width: bool = _JOB["toolpath"]["pitch_width"]
     flush: bool = _JOB["toolpath"]["flush"]

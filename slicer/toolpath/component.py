@@ -203,7 +203,8 @@ class Component:
                              closed_first=self.cfg.stripe_perimeter
                              and self.pattern == Pattern.STRIPE)
         linked = link_pieces(lines, pieces, self.vertices, self.faces, self.graph, w_rs,
-                             lifter, lift, factor, joiner)
+                             lifter, lift, factor, joiner,
+                             spiral=self.cfg.spiral_rings and level is not None)
         return Built(lines, linked, self._waypoints(linked, scale), scale=scale)
 
     def _waypoints(self, linked: LinkedPath, scale: NDArray[np.float64] | None = None

@@ -16,6 +16,8 @@ closer to the layer than ``lift``), and plunges onto the next line's start. Trav
 carry extrude=False and a path id of their own; a segment deposits iff both its ends extrude
 and share a path id. Where joins up to 3 W keep a component's volume match from converging,
 ``build`` links it again with 2 W joins and keeps the better match.
+Contour rings joined this way are blended into a spiral instead (``spiral.py``, config
+``spiral_rings``): a straight step across lies over both rings.
 ``Joiner`` computes each connector once: the stripe ordering asks it which line ends can be
 joined (``ordering._order_cover``) and the linking reuses the answers.
 """
@@ -33,6 +35,7 @@ from scipy.spatial import cKDTree
 from core.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.ordering import Piece
+from slicer.toolpath.spiral import Run, SpiralPlanner, spiral_runs
 
 EXTRUDE_FACTOR = 3.0  # connectors shorter than this times W extrude (config: join_factor)
 LIFT_FACTOR = 1.5  # travel clearance above the layer, in layer heights (>= 1)
@@ -318,6 +321,7 @@ def link_pieces(
     lift: float,
     extrude_factor: float = EXTRUDE_FACTOR,
     joiner: Joiner | None = None,
+    spiral: bool = False,
 ) -> LinkedPath:
     """Join ``pieces`` (on ``vertices``/``faces``) into paths; see the module rule.
 
@@ -334,6 +338,8 @@ def link_pieces(
             ``EXTRUDE_FACTOR``); longer gaps are lifted travel moves (a new start).
         joiner: connectors already computed for these lines (same width and factor), or
             None to compute them here.
+        spiral: consecutive joinable closed rings (contours) blend into each other instead
+            of a connector stepping across (``spiral.py``).
     """
     if joiner is None:
         joiner = Joiner(lines, vertices, faces, mg, width, lifter, extrude_factor)
@@ -356,12 +362,18 @@ def link_pieces(
         ext.append(np.full(len(p), e))
         pid.append(np.full(len(p), path, dtype=np.int32))
 
+    if spiral:
+        planner = SpiralPlanner(lines, vertices, faces, width, extrude_factor)
+        runs = spiral_runs(planner, pieces, joiner.can_join)
+    else:
+        runs = [Run(p.points, p.line, None, False) for p in pieces]
     prev_end: int | None = None
-    for k, piece in enumerate(pieces):
-        idx = piece.points
+    into_next = False
+    for k, run in enumerate(runs):
+        idx = run.points
         first = int(idx[0])
-        joined = False
-        if prev_end is not None:
+        joined = into_next
+        if prev_end is not None and not into_next:
             w = 0.5 * (width[prev_end] + width[first])
             conn = joiner.get(prev_end, first)
             if conn is not None:
@@ -376,7 +388,12 @@ def link_pieces(
             current += 1
         add(lines.points[idx], lines.face[idx].astype(np.int32), lines.bary[idx],
             np.zeros((len(idx), 3)), True, current, k)
+        if run.tail is not None:
+            # a blend into the next ring: on the layer, between two lines (piece -1)
+            add(run.tail.points, run.tail.face, run.tail.bary, np.zeros_like(run.tail.points),
+                True, current)
         prev_end = int(idx[-1])
+        into_next = run.into_next
     if not pts:
         return LinkedPath(np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros((0, 3)),
                           np.zeros((0, 3)), np.zeros(0, bool), np.zeros(0, np.int32),
