@@ -9,16 +9,10 @@ import pytest
 
 from core.stages import Toolpath
 from planner.cell import CellConfig
-from planner.orientation import (
-    COLLISION,
-    OK,
-    Reach,
-    alpha_of,
-    nozzle_axis,
-    tool_rotation,
-)
+from planner.nozzle_axis import alpha_of, nozzle_axis, tool_rotation
 from planner.placement import model_transform
 from planner.plan import plan
+from planner.reach import COLLISION, OK, Reach
 from planner.samples import resample
 from tests.planner.synthetic import make_toolpath, random_frames
 
