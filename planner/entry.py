@@ -28,7 +28,7 @@ import numpy as np
 from core.tolerance import tol
 from planner import kinematics as kin
 from planner.collision import NOZZLE, segment_box_distance
-from planner.orientation import COLLISION, NO_IK, OK, REASONS, Reach
+from planner.reach import COLLISION, NO_IK, OK, REASONS, Reach
 from planner.timing import Timing, path_parameter, time_law
 
 REACH_MM = 1500.0  # farther than any robot or tool point lies from any joint axis
@@ -47,7 +47,7 @@ class SafeMove:
         tcp: (K, 3) float64, mm, nozzle tip in the base frame.
         segment: (K,) int8, RETRACT, TRANSFER or PLUNGE of each sample.
         stop: (K,) bool, the motion rests here (the ends and the corners between segments).
-        status: (K,) int8, OK or the reason code (orientation.REASONS) of each sample.
+        status: (K,) int8, OK or the reason code (reach.REASONS) of each sample.
         clearance: (K,) float64, mm, smallest clearance of each sample.
         pair: (K,) int32, closest pair (into ``Reach.collision.names``), -1 if none; for a
             transfer sample whose nozzle is too close to the gel, the nozzle-gel pair.

@@ -29,7 +29,8 @@ from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.continuity import SWING_TOL_MM, subdivide
 from planner.entry import safe_heights, safe_move
-from planner.orientation import OK, Orientation, Reach, alpha_of, choose
+from planner.nozzle_axis import alpha_of
+from planner.orientation import Orientation, choose
 from planner.path_smoothing import smooth_along_paths
 from planner.placement import Placement, bbox, choose_placement, fit_gel, model_transform
 from planner.plan_report import (
@@ -41,6 +42,7 @@ from planner.plan_report import (
     unreachable_message,
     upright_report,
 )
+from planner.reach import OK, Reach
 from planner.samples import (
     Samples,
     expand_timing,

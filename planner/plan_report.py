@@ -17,8 +17,9 @@ from core.stages import Toolpath
 from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.entry import TRANSFER, SafeMove
-from planner.orientation import COLLISION, OK, REASONS, Orientation, Reach
+from planner.orientation import Orientation
 from planner.placement import Placement
+from planner.reach import COLLISION, OK, REASONS, Reach
 from planner.refusal import cause_of
 from planner.samples import Samples
 from planner.status import CAUSES, Cause
@@ -33,7 +34,7 @@ class Unreachable:
 
     Attributes:
         count: unreachable toolpath waypoints.
-        by_reason: their count per reason (``orientation.REASONS``), in order of appearance.
+        by_reason: their count per reason (``reach.REASONS``), in order of appearance.
         runs: one entry per run of consecutive waypoints with one reason: first and last
             waypoint and the reason (with the colliding pair).
         between_waypoints: samples inserted between waypoints (long moves) that fail too.

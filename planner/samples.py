@@ -19,16 +19,9 @@ from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.continuity import Subdivision
 from planner.entry import TRANSFER, SafeMove, joint_segment, move_speed
-from planner.orientation import (
-    ALPHA,
-    ALPHA_MIN_STEP_MM,
-    OK,
-    Orientation,
-    Reach,
-    alpha_allowed,
-    alpha_of,
-    unit,
-)
+from planner.nozzle_axis import ALPHA_MIN_STEP_MM, alpha_allowed, alpha_of, unit
+from planner.orientation import Orientation
+from planner.reach import ALPHA, OK, Reach
 from planner.timing import Timing
 
 

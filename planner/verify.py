@@ -23,7 +23,8 @@ import numpy as np
 
 from core.tolerance import tol
 from planner import kinematics as kin
-from planner.orientation import ALPHA_MIN_STEP_MM, Reach, alpha_of
+from planner.nozzle_axis import ALPHA_MIN_STEP_MM, alpha_of
+from planner.reach import Reach
 from planner.status import PlanStatus
 from planner.trajectory import Trajectory
 
