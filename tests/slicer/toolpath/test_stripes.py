@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from core.errors import InputError
-from slicer.toolpath import geodesic, stripes, surface, width_error
+from slicer.toolpath import (
+    geodesic,
+    poisson_stripes,
+    stripe_trim,
+    stripes,
+    surface,
+    width_error,
+)
 from slicer.toolpath.lines import SurfaceLines
 from tests.slicer.toolpath.pattern_meshes import disc, dome, sliver_disc
 
@@ -67,7 +74,7 @@ def test_radial_stripes_beat_the_poisson_alternative() -> None:
         np.linalg.norm(seg[far, :2], axis=1) * np.linalg.norm(mid[far, :2], axis=1))
     assert np.median(cosang) > 0.95
     err = width_error.width_error(width_error.line_spacing(lines.points, lines.line), w)
-    poisson = stripes.poisson_stripe_lines(v, f, direction, w)
+    poisson = poisson_stripes.poisson_stripe_lines(v, f, direction, w)
     _valid(v, f, poisson, 2.0)
     err_p = width_error.width_error(width_error.line_spacing(poisson.points, poisson.line), w)
     assert err.p90 <= 0.35
@@ -78,7 +85,7 @@ def test_poisson_potential_recovers_an_integrable_field() -> None:
     v, f = disc(10.0, 1.0, jitter=0.2)
     # lines along y: z = direction^perp = -x... the potential is a linear function of x
     direction = np.tile([0.0, 1.0, 0.0], (len(f), 1))
-    phi = stripes.poisson_potential(v, f, direction)
+    phi = poisson_stripes.poisson_potential(v, f, direction)
     a = np.polyfit(v[:, 0], phi, 1)
     assert abs(abs(a[0]) - 1.0) < 1e-6
     assert np.allclose(phi, np.polyval(a, v[:, 0]), atol=1e-6)
@@ -117,7 +124,7 @@ def test_two_components_each_get_their_stripes() -> None:
     v = np.concatenate([v1, v2 + np.array([25.0, 0.0, 0.0])])
     f = np.concatenate([f1, f2 + len(v1)])
     direction = np.tile([0.0, 1.0, 0.0], (len(f), 1))
-    for fn in (stripes.stripe_lines, stripes.poisson_stripe_lines):
+    for fn in (stripes.stripe_lines, poisson_stripes.poisson_stripe_lines):
         lines = fn(v, f, direction, 2.0)
         _valid(v, f, lines, 3.0)
         x = np.array([lines.points[lines.line == i, 0].mean() for i in range(lines.n_lines)])
@@ -172,7 +179,7 @@ def test_trim_cuts_a_converging_stripe_where_it_comes_closer_than_the_ratio() ->
     short = np.column_stack([xs, 2.0 - xs / 10.0, np.zeros_like(xs)])
     far = long_ + np.array([0.0, -2.0, 0.0])  # parallel at the spacing: never cut
     lines = _polyline([long_, short, far])
-    out = stripes.trim_converging(lines, 2.0, 0.7)
+    out = stripe_trim.trim_converging(lines, 2.0, 0.7)
     assert out.n_lines == 3
     assert np.array_equal(out.points[out.line == 0], long_)
     assert np.array_equal(out.points[out.line == 2], far)
@@ -188,10 +195,10 @@ def test_trim_keeps_closed_lines_and_drops_a_stripe_that_is_all_overlap() -> Non
     base = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
     twin = base[5:20] + np.array([0.0, 0.5, 0.0])  # short and 0.25 spacing away everywhere
     lines = _polyline([base, twin])
-    out = stripes.trim_converging(lines, 2.0, 0.7)
+    out = stripe_trim.trim_converging(lines, 2.0, 0.7)
     assert out.n_lines == 1 and np.array_equal(out.points, base)
     closed = lines._replace(closed=np.array([False, True]))
-    assert stripes.trim_converging(closed, 2.0, 0.7).n_lines == 2
+    assert stripe_trim.trim_converging(closed, 2.0, 0.7).n_lines == 2
 
 
 def test_radial_stripes_do_not_converge_after_trimming() -> None:
@@ -214,4 +221,4 @@ def test_radial_stripes_do_not_converge_after_trimming() -> None:
         if longer.any():
             gap = np.linalg.norm(lines.points[ln == i][:, None] - lines.points[longer][None],
                                  axis=2).min(axis=1)
-            assert gap.min() >= stripes.CONVERGE_TRIM * w - 0.6  # point-to-point, edge ~0.8
+            assert gap.min() >= stripe_trim.CONVERGE_TRIM * w - 0.6  # point-to-point, edge ~0.8
