@@ -51,7 +51,7 @@ from planner.samples import (
     resample,
     with_moves,
 )
-from planner.status import MESSAGES, Cause, PlanStatus
+from planner.status import MESSAGES, Cause, PlanStatus, TimingStatus
 from planner.timing import (
     Timing,
     angular_rates,
@@ -229,7 +229,7 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
         message = (f"the nozzle would leave the path by {split['worst_swing_mm']:.2f} mm between "
                    "two samples (a pose next to a singularity); move the part (placement) or "
                    "the robot base")
-    if timing.status != "ok" and status == PlanStatus.OK:
+    if timing.status != TimingStatus.OK and status == PlanStatus.OK:
         status, message = PlanStatus.TIME_LAW, timing.status
     with timer.stage("verify" + tag):
         # whatever the stages decided: the executed trajectory against every limit

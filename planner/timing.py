@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planner import kinematics as kin
+from planner.status import TimingStatus
 
 
 @dataclass(frozen=True)
@@ -235,7 +236,7 @@ def time_law(
     cap[0] = cap[-1] = 0.0
     if stop is not None:
         cap[np.asarray(stop, dtype=bool)] = 0.0
-    status = "ok"
+    status: str = TimingStatus.OK
     it = 0
     while True:  # a few passes, each fully vectorised
         it += 1
@@ -263,7 +264,7 @@ def time_law(
         if not over.any():
             break
         if it >= max_iter:
-            status = f"acceleration limit not met after {max_iter} passes"
+            status = f"{TimingStatus.ACCELERATION} after {max_iter} passes"
             break
         # shrink the caps at both ends of each offending step and try again
         shrink = np.ones(M)
