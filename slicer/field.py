@@ -49,6 +49,7 @@ from slicer.field_heights import (
 from slicer.field_systems import Poisson, ScalarHarmonic
 from slicer.operators import TetOperators, build_operators
 from slicer.solvers import SPDSolver
+from slicer.status import FieldStatus, SolverStatus
 
 ALIGN_WEIGHT = 1.0  # w_l; config.smoothness_weight is w_h relative to it
 NORMALISE_V = True
@@ -84,8 +85,10 @@ class FieldResult:
         layer_height_mm: float, mm, the target mean layer height the stats are scaled to.
         height: stats of the final field's layer height (mm).
         height_initial: stats of G0's layer height with the same target mean (mm).
-        status: "converged" | "max_iterations" | "planar" | "no_iterations" |
-            "solver_failed:<what>" (g is then the last good field).
+        status: how the iteration ended (``FieldStatus``; SOLVER_FAILED: g is then the last
+            good field).
+        failure: which solve failed and why ("initial:<why>", "vector:<why>",
+            "poisson:<why>"); '' unless SOLVER_FAILED.
         iterations: int, number of vector/scalar iterations done.
         trace: O_align and the layer-height std per iteration.
         timings: dict stage -> s.
@@ -102,7 +105,7 @@ class FieldResult:
     layer_height_mm: float
     height: HeightStats
     height_initial: HeightStats
-    status: str
+    status: FieldStatus
     iterations: int
     trace: FieldTrace
     timings: dict[str, float]
@@ -111,11 +114,17 @@ class FieldResult:
     constrained: np.ndarray
     operators: TetOperators = field(repr=False)
     height_start: HeightStats | None = None
+    failure: str = ""
+
+    @property
+    def status_text(self) -> str:
+        """The status as report.json writes it: ``"solver_failed:<what>"`` on a failure."""
+        return self.status.with_detail(self.failure)
 
     def report(self) -> dict[str, object]:
         """The field's part of report.json's "slicing" section (mm, s; JSON-ready)."""
         return {
-            "status": self.status,
+            "status": self.status_text,
             "iterations": self.iterations,
             "critical_regions": len(self.regions.regions),
             "height_mm": self.height.as_dict(),
@@ -217,7 +226,7 @@ def _compute_field(
         timings["total"] = time.perf_counter() - t_start
         return FieldResult(g=g, g0=g.copy(), gradient=grad, delta=delta,
                            layer_height_mm=target_h, height=hs, height_initial=hs,
-                           status="planar", iterations=0, trace=FieldTrace((), (hs.std,)),
+                           status=FieldStatus.PLANAR, iterations=0, trace=FieldTrace((), (hs.std,)),
                            timings=timings, notes=tuple(notes),
                            regions=selection, constrained=constrained, operators=ops)
 
@@ -243,7 +252,7 @@ def _compute_field(
                          method="amg", rtol=1e-6)
     vector = SPDSolver(w_l * sp.diags(mass[free]) + w_h * lf_ff, method="cg", rtol=VECTOR_RTOL)
     for name, s in (("poisson", poisson.solver), ("harmonic", harmonic), ("vector", vector)):
-        if s.status != "ok":
+        if s.status != SolverStatus.OK:
             notes.append(f"{name} solver: {s.status}")
     timings["setup"] = time.perf_counter() - t
     prog.end("field setup", timings["setup"])
@@ -255,17 +264,18 @@ def _compute_field(
     vf, st_h = harmonic.solve(-w_h * coupling)
     v[free] = vf
     g_start, _, st_p = poisson.solve(v)
-    st_s = "ok"
+    st_s: str = SolverStatus.OK
     if INITIAL_FIELD == "scalar":
         scalar = ScalarHarmonic(poisson, *harmonic_anchors(ops, selection, labels, comp))
         g0, st_s = scalar.solve()
-        if scalar.solver.status != "ok":
+        if scalar.solver.status != SolverStatus.OK:
             notes.append(f"scalar harmonic solver: {scalar.solver.status}")
     else:
         g0 = g_start
     timings["initial"] = time.perf_counter() - t
     prog.end("initial field", timings["initial"])
-    failed = next((s for s in (st_h, st_p, st_s) if s.startswith("failed")), "")
+    failed = next((s for s in (st_h, st_p, st_s)
+                   if SolverStatus.kind_of(s) is SolverStatus.FAILED), "")
     if failed or not np.all(np.isfinite(g0)) or not np.all(np.isfinite(g_start)):
         nan = np.full(ops.n_vertices, np.nan)
         hs = HeightStats(*(float("nan"),) * 6)
@@ -273,7 +283,8 @@ def _compute_field(
         return FieldResult(g=nan, g0=nan, gradient=np.full((ops.n_tets, 3), np.nan),
                            delta=float("nan"), layer_height_mm=target_h, height=hs,
                            height_initial=hs,
-                           status=f"solver_failed:initial:{failed or 'non-finite'}",
+                           status=FieldStatus.SOLVER_FAILED,
+                           failure=f"initial:{failed or 'non-finite'}",
                            iterations=0, trace=FieldTrace((), ()), timings=timings,
                            notes=tuple(notes), regions=selection, constrained=constrained,
                            operators=ops)
@@ -288,7 +299,9 @@ def _compute_field(
     g, grad = g_start, grad_start
     o_trace: list[float] = []
     std_trace = [hs0.std]
-    status = "no_iterations" if config.max_iterations == 0 else "max_iterations"
+    status = (FieldStatus.NO_ITERATIONS if config.max_iterations == 0
+              else FieldStatus.MAX_ITERATIONS)
+    failure = ""
     iterations = 0
     prev_vf: np.ndarray | None = None
     unconverged = 0
@@ -296,17 +309,17 @@ def _compute_field(
         target = _normalised(grad, v)
         rhs = w_l * mass[free, None] * target[free] - w_h * coupling
         vf, st_v = vector.solve(rhs, x0=prev_vf)
-        if st_v.startswith("failed"):
-            status = f"solver_failed:vector:{st_v}"
+        if SolverStatus.kind_of(st_v) is SolverStatus.FAILED:
+            status, failure = FieldStatus.SOLVER_FAILED, f"vector:{st_v}"
             break
         prev_vf = vf
         v_new = fixed.copy()
         v_new[free] = _normalised(vf, target[free]) if NORMALISE_V else vf
         g_new, o_align, st_p = poisson.solve(v_new)
-        if st_p.startswith("failed") or not np.all(np.isfinite(g_new)):
-            status = f"solver_failed:poisson:{st_p}"
+        if SolverStatus.kind_of(st_p) is SolverStatus.FAILED or not np.all(np.isfinite(g_new)):
+            status, failure = FieldStatus.SOLVER_FAILED, f"poisson:{st_p}"
             break
-        unconverged += (st_v != "ok") + (st_p != "ok")
+        unconverged += (st_v != SolverStatus.OK) + (st_p != SolverStatus.OK)
         v, g = v_new, g_new
         grad = ops.gradient(g)
         iterations = it + 1
@@ -318,7 +331,7 @@ def _compute_field(
         settled = len(o_trace) > 1 and (
             abs(o_trace[-1] - o_trace[-2]) < config.convergence * o_trace[-2])
         if settled or o_align <= 1e3 * tol.solver * float(vol.sum()):
-            status = "converged"
+            status = FieldStatus.CONVERGED
             break
     if unconverged:
         notes.append(f"{unconverged} iterative solve(s) stopped at their iteration cap")
@@ -330,7 +343,7 @@ def _compute_field(
     timings["total"] = time.perf_counter() - t_start
     return FieldResult(g=g, g0=g0, gradient=grad, delta=delta, layer_height_mm=target_h,
                        height=hs, height_initial=hs0,
-                       status=status, iterations=iterations,
+                       status=status, failure=failure, iterations=iterations,
                        trace=FieldTrace(tuple(o_trace), tuple(std_trace)), timings=timings,
                        notes=tuple(notes),
                        regions=selection, constrained=constrained, operators=ops,

@@ -13,6 +13,7 @@ from scipy.sparse.csgraph import connected_components
 
 from slicer.operators import TetOperators
 from slicer.solvers import SPDSolver
+from slicer.status import SolverStatus
 
 # Relative residual of the Poisson solves: the iteration is a fixed point that corrects
 # itself and v is renormalised after each solve (docs/benchmarks.md, field).
@@ -51,7 +52,7 @@ class Poisson:
         """g (V,) with min 0, O_align, status for the target vector field v (T, 3)."""
         rhs = self.collapse.T @ self.ops.divergence(v)
         x, status = self.solver.solve(rhs[self.free], x0=self._last)
-        if status.startswith("failed"):
+        if SolverStatus.kind_of(status) is SolverStatus.FAILED:
             return np.full(self.ops.n_vertices, np.nan), float("nan"), status
         self._last = x
         u = np.zeros(self.count)
@@ -79,7 +80,7 @@ class ScalarHarmonic:
     def solve(self) -> tuple[np.ndarray, str]:
         """g (V,) with min 0 and the solver status."""
         x, status = self.solver.solve(-(self.coupling @ self.values))
-        if status.startswith("failed"):
+        if SolverStatus.kind_of(status) is SolverStatus.FAILED:
             return np.full(self.poisson.ops.n_vertices, np.nan), status
         u = np.zeros(self.poisson.count)
         u[self.fixed] = self.values

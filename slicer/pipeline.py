@@ -173,7 +173,7 @@ def _slice(
     report = {
         "layers": extraction.layers.layer_count,
         "iterations": int(result.iterations),
-        "status": result.status,
+        "status": result.status_text,
         "planar": job.slicing.planar,
         "critical_regions": extraction.critical_report,
         "height_mm": final_stats.as_dict(),

@@ -20,16 +20,15 @@ tolerance.
 
 from __future__ import annotations
 
-from typing import Literal, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from core.errors import InputError
+from slicer.status import DeformStatus
 from slicer.toolpath.surface import check_mesh, components, face_normals, spd_solver
-
-Status = Literal["converged", "within_tolerance", "max_iterations"]
 
 
 class DeformResult(NamedTuple):
@@ -38,9 +37,9 @@ class DeformResult(NamedTuple):
     vertices: (n, 3) float64 mm, deformed layer (same connectivity as the input).
     scale:    (m,) float64, target per-face scale s_f (eq. 14).
     achieved: (m,) float64, achieved per-face scale sqrt(area_deformed / area).
-    status:   "within_tolerance" (achieved scale within ``scale_tol`` of the target on 90 % of
-              the area), "converged" (relative energy change below ``rtol``) or
-              "max_iterations".
+    status:   ``DeformStatus``: WITHIN_TOLERANCE (achieved scale within ``scale_tol`` of the
+              target on 90 % of the area), CONVERGED (relative energy change below ``rtol``)
+              or MAX_ITERATIONS.
     trace:    (k,) float64 mm^2, energy of eq. 13 after each iteration.
     deviation: float, area-weighted p90 of |achieved / scale - 1| at the result.
     """
@@ -48,7 +47,7 @@ class DeformResult(NamedTuple):
     vertices: NDArray[np.float64]
     scale: NDArray[np.float64]
     achieved: NDArray[np.float64]
-    status: Status
+    status: DeformStatus
     trace: NDArray[np.float64]
     deviation: float
 
@@ -195,7 +194,7 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
     x = v.copy()
     target, energy = local(x)
     trace: list[float] = []
-    status: Status = "max_iterations"
+    status = DeformStatus.MAX_ITERATIONS
     # energy that counts as zero: relative to the size of the layer in the same units
     floor = 1e-20 * float((area[:, None, None] * centred**2).sum())
     # Anderson acceleration of the local-global fixed point x -> G(x) (plain local-global
@@ -209,10 +208,10 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
     deviation = scale_deviation(x, f, area, scale)[0] if scale_tol > 0 else np.inf
     for _ in range(iterations):
         if energy <= floor:
-            status = "converged"
+            status = DeformStatus.CONVERGED
             break
         if deviation <= scale_tol:
-            status = "within_tolerance"
+            status = DeformStatus.WITHIN_TOLERANCE
             break
         g = global_step(target, x)
         res = (g - x)[free].ravel()
@@ -239,10 +238,10 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
         if scale_tol > 0:
             deviation = scale_deviation(x, f, area, scale)[0]
         if deviation <= scale_tol:
-            status = "within_tolerance"
+            status = DeformStatus.WITHIN_TOLERANCE
             break
         if energy <= floor or abs(previous - energy) <= rtol * max(previous, 1e-300):
-            status = "converged"
+            status = DeformStatus.CONVERGED
             break
     for comp in components(f):  # each piece moves back to its own centroid
         ids = np.unique(f[comp])
