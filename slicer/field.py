@@ -58,6 +58,7 @@ HARMONIC_REGULARISATION = 1e-8  # tiny mass term keeping the pure-smoothness sys
 # Relative residual of the vector solve: the iteration is a fixed point that corrects itself
 # and v is renormalised after each solve (docs/benchmarks.md, field).
 VECTOR_RTOL = 1e-5
+HARMONIC_RTOL = 1e-6  # the harmonic vector field only starts the iteration
 
 
 class FieldTrace(NamedTuple):
@@ -249,7 +250,7 @@ def _compute_field(
     coupling = sp.csr_matrix(lf[free][:, cons]) @ fixed[cons]  # (F, 3)
     w_h, w_l = config.smoothness_weight, ALIGN_WEIGHT
     harmonic = SPDSolver(w_h * lf_ff + sp.diags(HARMONIC_REGULARISATION * mass[free]),
-                         method="amg", rtol=1e-6)
+                         method="amg", rtol=HARMONIC_RTOL)
     vector = SPDSolver(w_l * sp.diags(mass[free]) + w_h * lf_ff, method="cg", rtol=VECTOR_RTOL)
     for name, s in (("poisson", poisson.solver), ("harmonic", harmonic), ("vector", vector)):
         if s.status != SolverStatus.OK:

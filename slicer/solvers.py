@@ -22,6 +22,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
+from core.tolerance import tol
 from slicer.status import SolverStatus
 
 Method = Literal["auto", "cholespy", "amg", "cg", "splu"]
@@ -130,7 +131,7 @@ class SPDSolver:
             out = np.empty_like(probe)
             solver.solve(np.ascontiguousarray(a @ probe), out)
             err = np.abs(out - probe).max()
-            if not np.isfinite(err) or err > 1e-6:
+            if not np.isfinite(err) or err > tol.computed:
                 raise ValueError(f"factorization inaccurate (error {err:.1e}; not SPD?)")
             return solver
         if name == "amg":

@@ -27,6 +27,7 @@ import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from core.errors import InputError
+from core.tolerance import tol
 from slicer.status import DeformStatus
 from slicer.toolpath.surface import check_mesh, components, face_normals, spd_solver
 
@@ -61,7 +62,7 @@ def scale_deviation(vertices: NDArray[np.float64], faces: NDArray[np.int64],
     areas before deformation; scale: (m,) target per-face scale s_f.
     """
     _, area_d = face_normals(vertices, faces)
-    achieved = np.sqrt(area_d / np.maximum(area, 1e-300))
+    achieved = np.sqrt(area_d / np.maximum(area, tol.tiny))
     dev = np.abs(achieved / scale - 1.0)
     order = np.argsort(dev)
     cum = np.cumsum(area[order])
@@ -74,7 +75,7 @@ def face_scale(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     """(m,) s_f = 3 W_mean / sum_i W(x_i) (eq. 14); W_mean is the area-weighted mean width."""
     _, area = face_normals(vertices, faces)
     w_face = width[faces].mean(axis=1)
-    w_mean = float((w_face * area).sum() / max(area.sum(), 1e-300))
+    w_mean = float((w_face * area).sum() / max(area.sum(), tol.tiny))
     return w_mean / w_face
 
 
@@ -99,9 +100,9 @@ def _rotations(src: NDArray[np.float64], dst: NDArray[np.float64]) -> NDArray[np
 def _frames(centred: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Orthonormal in-plane frames (e1, e2), each (m, 3), of centred triangles (m, 3, 3)."""
     e1 = centred[:, 1] - centred[:, 0]
-    e1 /= np.maximum(np.linalg.norm(e1, axis=1), 1e-300)[:, None]
+    e1 /= np.maximum(np.linalg.norm(e1, axis=1), tol.tiny)[:, None]
     n = np.cross(centred[:, 1] - centred[:, 0], centred[:, 2] - centred[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+    n /= np.maximum(np.linalg.norm(n, axis=1), tol.tiny)[:, None]
     return e1, np.cross(n, e1)
 
 
@@ -156,7 +157,7 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
     used = np.unique(f)
     scale = face_scale(v, f, w)
     _, area = face_normals(v, f)
-    wt = np.sqrt(area / max(area.mean(), 1e-300))
+    wt = np.sqrt(area / max(area.mean(), tol.tiny))
     # A: (3m, n) rows x_k - mean(x_f) weighted by sqrt(area); K = A^T A depends on topology only
     rows = np.repeat(np.arange(3 * m), 3)
     cols = np.repeat(f, 3, axis=0).reshape(-1)
@@ -240,7 +241,7 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
         if deviation <= scale_tol:
             status = DeformStatus.WITHIN_TOLERANCE
             break
-        if energy <= floor or abs(previous - energy) <= rtol * max(previous, 1e-300):
+        if energy <= floor or abs(previous - energy) <= rtol * max(previous, tol.tiny):
             status = DeformStatus.CONVERGED
             break
     for comp in components(f):  # each piece moves back to its own centroid

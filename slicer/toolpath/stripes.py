@@ -51,6 +51,9 @@ from slicer.toolpath.surface import (
     vertex_normals,
 )
 
+EIGEN_SHIFT = 1e-6  # sigma of the shift-invert, relative to the mean diagonal of A over M
+ARPACK_RTOL = 1e-6  # relative accuracy of ARPACK's eigenpair (the ``arpack`` alternative)
+
 
 class StripeField(NamedTuple):
     """The optimised periodic field behind ``stripe_lines``.
@@ -148,14 +151,14 @@ def stripe_field(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     mass = np.repeat(np.maximum(lumped_mass(v, f), tol.zero), 2)
     mmat = sp.diags(mass).tocsc()
     # shift-invert just below zero: A is PSD, so A - sigma M is definite and splu-stable
-    sigma = -1e-6 * float(amat.diagonal().mean() / mass.mean())
+    sigma = -EIGEN_SHIFT * float(amat.diagonal().mean() / mass.mean())
     # one factorisation serves the shift-invert eigen solve and the refinement below
     solve = spd_solver(amat - sigma * mmat)
     opinv = LinearOperator((2 * n, 2 * n), matvec=solve, dtype=np.float64)
     rng = np.random.default_rng(0)
     if eigen == "arpack":
         vals_, vecs = eigsh(amat, k=1, M=mmat, sigma=sigma, which="LM", OPinv=opinv,
-                            v0=rng.standard_normal(2 * n), tol=1e-6, ncv=8)
+                            v0=rng.standard_normal(2 * n), tol=ARPACK_RTOL, ncv=8)
         x = vecs[:, 0].reshape(n, 2)
         lam = float(vals_[0])
     else:
