@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from core.tolerance import tol
 from planner.cell import CellConfig
 
 ALPHA_MIN_STEP_MM = 0.1  # a depositing step shorter than this lays a dot, not a filament:
@@ -19,7 +20,7 @@ ALPHA_MIN_STEP_MM = 0.1  # a depositing step shorter than this lays a dot, not a
 def unit(v: np.ndarray) -> np.ndarray:
     """Rows of ``v`` (..., 3) normalised (zero rows stay zero)."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n > 1e-12, n, 1.0)
+    return v / np.where(n > tol.zero, n, 1.0)
 
 
 def any_perpendicular(n: np.ndarray) -> np.ndarray:
@@ -40,7 +41,7 @@ def nozzle_axis(normal: np.ndarray, tangent: np.ndarray, tilt: np.ndarray,
     from ``-normal`` is arccos(cos(tilt) cos(lean)).
     """
     t = tangent - np.einsum("ni,ni->n", tangent, normal)[:, None] * normal
-    bad = np.linalg.norm(t, axis=1) < 1e-9
+    bad = np.linalg.norm(t, axis=1) < tol.floor
     t = np.where(bad[:, None], any_perpendicular(normal), unit(t))
     ct = np.cos(tilt)[:, None]
     axis = -ct * normal + np.sin(tilt)[:, None] * t
@@ -71,7 +72,7 @@ def tool_rotation(axis: np.ndarray, psi: np.ndarray) -> np.ndarray:
 def alpha_allowed(cell: CellConfig, alpha: np.ndarray, extrude: np.ndarray) -> np.ndarray:
     """(N,) bool: alpha (rad) is within the allowed range, or the sample does not extrude."""
     lo, hi = np.radians([cell.planning.alpha_min_deg, cell.planning.alpha_max_deg])
-    return ~extrude | ((alpha >= lo - 1e-9) & (alpha <= hi + 1e-9))
+    return ~extrude | ((alpha >= lo - tol.slack) & (alpha <= hi + tol.slack))
 
 
 def alpha_within(cell: CellConfig, axis: np.ndarray, leave: np.ndarray, extrude: np.ndarray,

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from core.tolerance import tol
 from planner.cell import CellConfig
 from planner.nozzle_axis import alpha_of, alpha_within, nozzle_axis, tool_rotation
 from planner.reach import ALPHA, COLLISION, JOINT_LIMIT, OK, Evaluation, Reach
@@ -76,7 +77,7 @@ def orientation_levels(cell: CellConfig, alpha0: np.ndarray, tilt_step_deg: floa
     """
     tilts = np.degrees(tilt_levels(cell, alpha0, tilt_step_deg))
     lmax = cell.planning.lean_max_deg
-    n = int(np.floor(lmax / lean_step_deg + 1e-9))
+    n = int(np.floor(lmax / lean_step_deg + tol.slack))
     leans = np.union1d(np.arange(-n, n + 1) * lean_step_deg, [0.0])
     T, L = np.meshgrid(tilts, leans, indexing="ij")
     T, L = T.ravel(), L.ravel()
@@ -287,9 +288,9 @@ def choose(
             lean = lean + ramp(new_lean - lean, per_sample)
         # keep extruding samples' alpha in range: alpha = alpha0 - tilt
         tilt = np.where(extrude, np.clip(tilt, alpha0 - hi_a, alpha0 - lo_a), tilt)
-        changed = np.flatnonzero((np.abs(psi - old_psi) > 1e-12)
-                                 | (np.abs(tilt - old_tilt) > 1e-12)
-                                 | (np.abs(lean - old_lean) > 1e-12))
+        changed = np.flatnonzero((np.abs(psi - old_psi) > tol.zero)
+                                 | (np.abs(tilt - old_tilt) > tol.zero)
+                                 | (np.abs(lean - old_lean) > tol.zero))
         if len(changed):
             q_c, ev_c, ax_c = evaluate(changed, psi[changed], tilt[changed], lean[changed],
                                        q_ref[changed], 1)
