@@ -182,7 +182,7 @@ def check_move(reach: Reach, q: np.ndarray, segment: np.ndarray,
         hit[rows] = clear[rows] < need[rows]
     if tolerate_start and len(q) > 1:
         # a prefix whose clearance never decreases is what leaving the current pose costs
-        nondec = np.r_[True, np.diff(clear) >= -1e-6]
+        nondec = np.r_[True, np.diff(clear) >= -tol.computed]
         prefix = np.logical_and.accumulate(nondec)
         hit &= ~prefix
     status[hit & (status == OK)] = COLLISION
@@ -286,7 +286,7 @@ def time_move(reach: Reach, move: SafeMove) -> Timing:
     qk = q[keep]
     if len(qk) < 2:
         z = np.zeros(len(q))
-        return Timing(np.arange(len(q)) * 1e-6, np.zeros((len(q), 6)), z, z,
+        return Timing(np.arange(len(q)) * tol.still, np.zeros((len(q), 6)), z, z,
                       np.zeros(len(q), bool), 0, "ok")
     s = path_parameter(tcp[keep], T[keep, :3, :3])
     dq = np.gradient(qk, s, axis=0)
@@ -297,6 +297,6 @@ def time_move(reach: Reach, move: SafeMove) -> Timing:
     if keep.all():
         return timing
     src = np.cumsum(keep) - 1
-    t = timing.t[src] + 1e-6 * np.cumsum(~keep)
+    t = timing.t[src] + tol.still * np.cumsum(~keep)
     return Timing(t, timing.qd[src], timing.speed[src], timing.target[src],
                   timing.limited[src], timing.iterations, timing.status)

@@ -146,7 +146,7 @@ def moving_samples(q: np.ndarray) -> np.ndarray:
     """(M,) bool: False for samples whose joints equal the previous sample's (to 1e-6 rad)."""
     keep = np.ones(len(q), dtype=bool)
     if len(q) > 1:
-        keep[1:] = np.abs(np.diff(q, axis=0)).max(axis=1) > 1e-6
+        keep[1:] = np.abs(np.diff(q, axis=0)).max(axis=1) > tol.still
     return keep
 
 
