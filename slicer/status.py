@@ -34,7 +34,7 @@ class SolverStatus(Status):
 class FieldStatus(Status):
     """How the slicing field's iteration ended (``slicer.field.FieldResult.status``)."""
 
-    CONVERGED = "converged", "O_align changed by less than the convergence threshold"
+    CONVERGED = "converged", "the alignment O_align changed by less than the convergence threshold"
     MAX_ITERATIONS = "max_iterations", "stopped after max_iterations without converging"
     PLANAR = "planar", "planar slicing: g = z, no iteration"
     NO_ITERATIONS = "no_iterations", "max_iterations = 0: the initial field is the result"
