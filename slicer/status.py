@@ -76,3 +76,13 @@ class ToolpathStatus(Status):
     OK = "ok", "every component's volume matched within the tolerance"
     VOLUME = "volume", "some component missed the volume tolerance"
     FAILED_COMPONENTS = "failed-components", "some component was skipped (reasons in the report)"
+
+
+class ComponentFallback(Status):
+    """How a layer component was printed instead of its pattern (``ComponentResult.fallback``)."""
+
+    NONE = "", "printed with its layer's pattern"
+    CONTOUR = "contour", "a stripe component too narrow for stripes, printed with contours"
+    CENTRE_LINE = "centre-line", "a band too narrow for two lines: one line along its middle"
+    HOLES_FILLED = "holes-filled", "fitted contours left holes (no band): eq. 9's lines fill them"
+    NO_BAND = "no-band", "no band: eq. 9's contours alone kept their spacing better"

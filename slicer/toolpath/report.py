@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 
 from core.stages import Toolpath
 from slicer.extrusion import ExtrusionProfile
-from slicer.status import ToolpathStatus, VolumeStatus
+from slicer.status import ComponentFallback, ToolpathStatus, VolumeStatus
 from slicer.toolpath.linking import deposit_mask
 from slicer.toolpath.results import PATTERN_NAMES, LayerResult
 from slicer.toolpath.volume import segment_volume
@@ -120,11 +120,11 @@ def toolpath_report(results: list[LayerResult], tp: Toolpath, profile: Extrusion
         },
         "volume_match_status": statuses,
         "thin_fallback": {kind: sum(c.fallback == kind for c in comps)
-                          for kind in ("contour", "centre-line")},
+                          for kind in (ComponentFallback.CONTOUR, ComponentFallback.CENTRE_LINE)},
         # contour components that are no band (fitted lines left holes, eq. 9 lines fill them)
-        "band_fit_holes_filled": sum(c.fallback == "holes-filled" for c in comps),
+        "band_fit_holes_filled": sum(c.fallback == ComponentFallback.HOLES_FILLED for c in comps),
         # no band, and eq. 9's contours alone kept their spacing better than the fitted ones
-        "band_fit_dropped": sum(c.fallback == "no-band" for c in comps),
+        "band_fit_dropped": sum(c.fallback == ComponentFallback.NO_BAND for c in comps),
         "deformation_status": deform,
         "height_out_of_profile_fraction": out_of_range / n_vert if n_vert else 0.0,
         "profile": {"name": profile.name, "sha256": profile.sha256,
