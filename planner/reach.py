@@ -2,14 +2,16 @@
 
 ``Reach`` solves the UR5e's IK on the branch of the home pose and checks each pose against the
 joint limits (with the cell's margin), the shoulder/wrist singularities and the cell's clearance;
-``Evaluation`` holds the verdict per pose, a code of ``REASONS`` (``OK`` if none). Every planner
-stage that places the nozzle (orientation, placement, entry, preflight) checks poses here.
+``Evaluation`` holds the verdict per pose, a ``PoseStatus`` (``OK``, or the code of one of
+``REASONS``). Every planner stage that places the nozzle (orientation, placement, entry,
+preflight) checks poses here.
 Positions are mm (metres only at the kinematics' boundary), angles rad.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from enum import IntEnum
 
 import numpy as np
 
@@ -17,8 +19,21 @@ from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.collision import CollisionModel
 
-OK, NO_IK, JOINT_LIMIT, SINGULAR, COLLISION, ALPHA = 0, 1, 2, 3, 4, 5
-REASONS = {
+
+class PoseStatus(IntEnum):
+    """Why a tool pose is not reachable within the limits (``OK``: it is); stored as int8 per
+    pose (``Evaluation.status``, ``Orientation.status``). ``REASONS`` says what each means."""
+
+    OK = 0
+    NO_IK = 1
+    JOINT_LIMIT = 2
+    SINGULAR = 3
+    COLLISION = 4
+    ALPHA = 5
+
+
+OK, NO_IK, JOINT_LIMIT, SINGULAR, COLLISION, ALPHA = PoseStatus  # the members by name
+REASONS: dict[int, str] = {
     NO_IK: "out of reach (no inverse kinematics solution on the home branch)",
     JOINT_LIMIT: "joint limit",
     SINGULAR: "near a singularity",
@@ -34,7 +49,7 @@ class Evaluation:
     Attributes:
         q: (S, 6) float64, rad, joint solution on the home branch (nearest to ``q_ref``);
             nan where no solution.
-        status: (S,) int8, OK or a reason code (NO_IK, JOINT_LIMIT, SINGULAR, COLLISION).
+        status: (S,) int8, a ``PoseStatus``: OK or NO_IK, JOINT_LIMIT, SINGULAR, COLLISION.
         singular: (S,) float64, distance from the singularities (``singularity_margin``).
         clearance: (S,) float64, mm (nan if not computed or no solution).
         margin: (S,) float64, rad, smallest distance to a joint position limit.
