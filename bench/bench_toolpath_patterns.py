@@ -19,7 +19,15 @@ import scipy.sparse as sp
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from slicer.toolpath import contours, deform, geodesic, stripes, surface, width_error
+from slicer.toolpath import (
+    contours,
+    deform,
+    geodesic,
+    poisson_stripes,
+    stripes,
+    surface,
+    width_error,
+)
 from tests.slicer.toolpath.pattern_meshes import disc, dome, sliver_disc
 
 BACKENDS = (("heat", True), ("heat", False), ("potpourri3d", True), ("igl", True), ("fmm", True))
@@ -66,7 +74,7 @@ def main() -> None:
     print(f"direction      {dt:.3f} s")
     lines_s, dt = timed(stripes.stripe_lines, res.vertices, f, z, w_mean)
     print(f"stripes        {dt:.2f} s  lines {lines_s.n_lines}")
-    lines_p, dt = timed(stripes.poisson_stripe_lines, res.vertices, f, z, w_mean)
+    lines_p, dt = timed(poisson_stripes.poisson_stripe_lines, res.vertices, f, z, w_mean)
     print(f"poisson        {dt:.3f} s  lines {lines_p.n_lines}")
     for name, lines in (("contour", lines_c), ("two-sided", lines_t), ("stripe", lines_s),
                         ("poisson", lines_p)):

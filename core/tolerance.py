@@ -16,8 +16,20 @@ class Tolerance:
         unit: float, |norm - 1| below this counts as a unit vector.
         iso: float, relative offset keeping iso-values off mesh vertices.
         solver: float, relative residual accepted from iterative sparse solvers.
-        slack: float, absolute slack of a float comparison against a limit (mm, deg, a
-            cosine), so a value exactly on the limit is not refused by rounding.
+        slack: float, slack of a float comparison against a limit, absolute (mm, deg, s, a
+            cosine) or relative to the limit, so a value exactly on the limit is not refused
+            by rounding.
+        floor: float, a derived quantity (a step, spacing, speed or angle: mm, mm/s, s, rad)
+            below this counts as zero, and a divisor made of one is clamped to it; coarser
+            than ``zero`` because such values carry the rounding of the arithmetic that made
+            them.
+        still: float, mm, rad or s, a step, joint change, axis turn or time step below this
+            is no motion (a repeated waypoint or pose).
+        tiny: float, the smallest divisor: a sum, area or length that may be exactly zero is
+            clamped to it before dividing, which changes no value that is not zero.
+        computed: float, relative (or mm) accuracy of a value computed by a factorisation or
+            an iteration: a probe solve, a clearance or a recurrence's end point within this
+            of its target agrees with it.
     """
 
     zero: float = 1e-12
@@ -26,6 +38,10 @@ class Tolerance:
     iso: float = 1e-9
     solver: float = 1e-10
     slack: float = 1e-9
+    floor: float = 1e-9
+    still: float = 1e-6
+    computed: float = 1e-6
+    tiny: float = 1e-300
 
 
 tol = Tolerance()

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from core.errors import InputError
+from core.status import JobState
 from mesp_cell.bus.secret import cell_secret, mesp_home
 from mesp_cell.bus.session import Bus, BusConfig
 from mesp_cell.job_import import submit_copies
@@ -150,7 +151,8 @@ class CellClient:
         confirm the tank is ready. A refusal (e-stop latched, job ended) is an InputError."""
         end = time.monotonic() + timeout
         job = self.store.get(job_id)
-        while job.state in ("submitted", "sliced", "planned") and time.monotonic() < end:
+        before = (JobState.SUBMITTED, JobState.SLICED, JobState.PLANNED)
+        while job.state in before and time.monotonic() < end:
             time.sleep(0.05)
             job = self.store.get(job_id)
         reply = self.command("ready", job_id, who=who)

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from core.tolerance import tol
 from mesp_cell.messages import Command
 
 START_TOL_DEG = 1.0  # deg, largest joint difference between the arm and a stream's first sample
@@ -59,7 +60,7 @@ def clearance_refusal(q: np.ndarray, collision: Any, required_mm: float) -> str:
     idx = np.unique(np.linspace(0, len(q) - 1, min(len(q), MAX_CHECKED)).round().astype(int))
     clear = collision.clearance(q[idx])
     worst = int(np.argmin(clear.distance))
-    if clear.distance[worst] < required_mm - 1e-6:
+    if clear.distance[worst] < required_mm - tol.computed:
         return (f"trajectory sample {idx[worst]} comes {clear.distance[worst]:.1f} mm from the "
                 f"cell ({clear.names[clear.pair[worst]]}), under the required {required_mm:g} mm")
     return ""

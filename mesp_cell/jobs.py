@@ -33,17 +33,18 @@ from mesp_cell.job_import import copy_into, importable, profile_refusal, safe_na
 
 STATES = tuple(JobState)
 FINAL = frozenset(s for s in JobState if s.final)
-TRANSITIONS: dict[str, frozenset[str]] = {
-    "submitted": frozenset({"sliced", "failed", "aborted"}),
-    "sliced": frozenset({"planned", "failed", "aborted"}),
-    "planned": frozenset({"ready_check", "failed", "aborted"}),
-    "ready_check": frozenset({"printing", "failed", "aborted"}),
-    "printing": frozenset({"paused", "interrupted", "done", "failed", "aborted"}),
-    "paused": frozenset({"printing", "aborted", "failed"}),
-    "interrupted": frozenset({"printing", "aborted", "failed"}),
-    "done": frozenset(),
-    "failed": frozenset(),
-    "aborted": frozenset(),
+_ENDS = (JobState.FAILED, JobState.ABORTED)  # reachable from every state that is not final
+TRANSITIONS: dict[str, frozenset[JobState]] = {
+    JobState.SUBMITTED: frozenset({JobState.SLICED, *_ENDS}),
+    JobState.SLICED: frozenset({JobState.PLANNED, *_ENDS}),
+    JobState.PLANNED: frozenset({JobState.READY_CHECK, *_ENDS}),
+    JobState.READY_CHECK: frozenset({JobState.PRINTING, *_ENDS}),
+    JobState.PRINTING: frozenset({JobState.PAUSED, JobState.INTERRUPTED, JobState.DONE, *_ENDS}),
+    JobState.PAUSED: frozenset({JobState.PRINTING, *_ENDS}),
+    JobState.INTERRUPTED: frozenset({JobState.PRINTING, *_ENDS}),
+    JobState.DONE: frozenset(),
+    JobState.FAILED: frozenset(),
+    JobState.ABORTED: frozenset(),
 }
 
 _SCHEMA = """
@@ -268,7 +269,7 @@ class JobStore:
             if why:
                 raise InputError(why, "see `mesp job status`")
             now = time.time()
-            resume = 0 if new_state == "printing" else job.resume
+            resume = 0 if new_state == JobState.PRINTING else job.resume
             db.execute("UPDATE jobs SET state = ?, reason = ?, updated = ?, resume = ?, "
                        "ready = 0 WHERE id = ?", (new_state, reason, now, resume, job_id))
             db.execute("INSERT INTO events VALUES (?, ?, ?, ?, ?)",
@@ -278,7 +279,7 @@ class JobStore:
     def request_resume(self, job_id: str) -> JobRecord:
         """Flag a paused or interrupted job for the supervisor to resume."""
         job = self.get(job_id)
-        if job.state not in ("paused", "interrupted"):
+        if job.state not in (JobState.PAUSED, JobState.INTERRUPTED):
             raise InputError(f"job {job_id} is {job.state}; only a paused or interrupted job "
                              "can be resumed", "see `mesp job status`")
         with self._tx() as db:
@@ -294,7 +295,7 @@ class JobStore:
             if row is None:
                 raise InputError(f"no job '{job_id}'", "list the jobs with `mesp job list`")
             job = JobRecord(*row)
-            if job.state != "ready_check":
+            if job.state != JobState.READY_CHECK:
                 raise InputError(f"job {job_id} is {job.state}; only a job waiting in "
                                  "ready_check takes the tank-ready confirmation",
                                  "confirm it when the cell asks (`mesp job list`)")

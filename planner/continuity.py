@@ -84,7 +84,7 @@ def subdivide(q: np.ndarray, solve: Callable[[np.ndarray, np.ndarray, np.ndarray
     Args:
         q: (M, 6) float64, rad, the configurations along the path (continuous).
         solve: (tcp (S, 3) mm, R (S, 3, 3), q_ref (S, 6)) -> (S, 6) rad, inverse kinematics
-            on the trajectory's branch wrapped next to ``q_ref`` (``orientation.Reach.solve``).
+            on the trajectory's branch wrapped next to ``q_ref`` (``reach.Reach.solve``).
         tool_m: (4, 4) tool transform in m.
     """
     def nothing(worst: float) -> Subdivision:

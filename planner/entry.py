@@ -28,7 +28,7 @@ import numpy as np
 from core.tolerance import tol
 from planner import kinematics as kin
 from planner.collision import NOZZLE, segment_box_distance
-from planner.orientation import COLLISION, NO_IK, OK, REASONS, Reach
+from planner.reach import COLLISION, NO_IK, OK, REASONS, Reach
 from planner.timing import Timing, path_parameter, time_law
 
 REACH_MM = 1500.0  # farther than any robot or tool point lies from any joint axis
@@ -47,7 +47,7 @@ class SafeMove:
         tcp: (K, 3) float64, mm, nozzle tip in the base frame.
         segment: (K,) int8, RETRACT, TRANSFER or PLUNGE of each sample.
         stop: (K,) bool, the motion rests here (the ends and the corners between segments).
-        status: (K,) int8, OK or the reason code (orientation.REASONS) of each sample.
+        status: (K,) int8, OK or the reason code (reach.REASONS) of each sample.
         clearance: (K,) float64, mm, smallest clearance of each sample.
         pair: (K,) int32, closest pair (into ``Reach.collision.names``), -1 if none; for a
             transfer sample whose nozzle is too close to the gel, the nozzle-gel pair.
@@ -182,7 +182,7 @@ def check_move(reach: Reach, q: np.ndarray, segment: np.ndarray,
         hit[rows] = clear[rows] < need[rows]
     if tolerate_start and len(q) > 1:
         # a prefix whose clearance never decreases is what leaving the current pose costs
-        nondec = np.r_[True, np.diff(clear) >= -1e-6]
+        nondec = np.r_[True, np.diff(clear) >= -tol.computed]
         prefix = np.logical_and.accumulate(nondec)
         hit &= ~prefix
     status[hit & (status == OK)] = COLLISION
@@ -286,7 +286,7 @@ def time_move(reach: Reach, move: SafeMove) -> Timing:
     qk = q[keep]
     if len(qk) < 2:
         z = np.zeros(len(q))
-        return Timing(np.arange(len(q)) * 1e-6, np.zeros((len(q), 6)), z, z,
+        return Timing(np.arange(len(q)) * tol.still, np.zeros((len(q), 6)), z, z,
                       np.zeros(len(q), bool), 0, "ok")
     s = path_parameter(tcp[keep], T[keep, :3, :3])
     dq = np.gradient(qk, s, axis=0)
@@ -297,6 +297,6 @@ def time_move(reach: Reach, move: SafeMove) -> Timing:
     if keep.all():
         return timing
     src = np.cumsum(keep) - 1
-    t = timing.t[src] + 1e-6 * np.cumsum(~keep)
+    t = timing.t[src] + tol.still * np.cumsum(~keep)
     return Timing(t, timing.qd[src], timing.speed[src], timing.target[src],
                   timing.limited[src], timing.iterations, timing.status)

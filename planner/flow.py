@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from core.errors import InputError
 from core.stages import Toolpath
+from core.tolerance import tol
 
 # the lowest scale commanded: the arm stopping dead (a U-turn) still gets a trickle, so the
 # extruder's screw keeps its pressure (its flow response is first order, tau ~0.2 s)
@@ -80,14 +81,14 @@ def segment_speeds(toolpath: Toolpath, trajectory: Timed) -> PlannedSpeeds:
     v0, v1 = toolpath.speed[:-1], toolpath.speed[1:]
     moving = (length > 0.0) & (v0 > 0) & (v1 > 0)
     # time at a speed linear in arc length: integral of ds / v = L ln(v1 / v0) / (v1 - v0)
-    a, b = np.maximum(v0, 1e-12), np.maximum(v1, 1e-12)
-    close = np.abs(b - a) <= 1e-9 * np.maximum(a, b)
+    a, b = np.maximum(v0, tol.zero), np.maximum(v1, tol.zero)
+    close = np.abs(b - a) <= tol.slack * np.maximum(a, b)
     per_mm = np.where(close, 2.0 / (a + b),
                       np.log(b / a) / np.where(close, 1.0, b - a))
     target_duration = np.where(moving, length * per_mm, 0.0)
     # t increases strictly (Trajectory checks it), so every duration is positive
-    speed = np.where(length > 0.0, length / np.maximum(duration, 1e-12), 0.5 * (v0 + v1))
-    ratio = np.where(moving, target_duration / np.maximum(duration, 1e-12), 1.0)
+    speed = np.where(length > 0.0, length / np.maximum(duration, tol.zero), 0.5 * (v0 + v1))
+    ratio = np.where(moving, target_duration / np.maximum(duration, tol.zero), 1.0)
     return PlannedSpeeds(speed=speed, ratio=ratio, duration=duration,
                          target_duration=target_duration)
 

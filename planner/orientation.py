@@ -7,11 +7,12 @@ singularities or collisions demand it: a *tilt* in the plane of normal and motio
 alpha, so it is bounded by [alpha_min, alpha_max]) and a *lean* about the direction of motion
 (it keeps alpha, bounded by ``lean_max_deg``); on steep layer regions the lean swings the
 holder and extruder body back over the part, out of the gel and away from the tank walls.
-``Reach`` checks a batch of tool poses (IK on the home branch, joint limits with margin,
-singularity, clearance); ``choose`` picks psi by dynamic programming over a subsample
-(margins as cost, smooth spin), then, only where a sample fails, the (tilt, lean) pair with
-the smallest deviation from ``-normal`` (a lean before a tilt of the same size), ramping
-both in and out at 1 deg per sample. Positions here are mm, angles rad.
+``planner.reach.Reach`` checks each pose (IK on the home branch, joint limits with margin,
+singularity, clearance; the axis geometry is ``planner.nozzle_axis``); ``choose`` picks psi
+by dynamic programming over a subsample (margins as cost, smooth spin), then, only where a
+sample fails, the (tilt, lean) pair with the smallest deviation from ``-normal`` (a lean
+before a tilt of the same size), ramping both in and out at 1 deg per sample.
+Positions here are mm, angles rad.
 """
 
 from __future__ import annotations
@@ -21,178 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
-from planner import kinematics as kin
+from core.tolerance import tol
 from planner.cell import CellConfig
-from planner.collision import CollisionModel
-
-OK, NO_IK, JOINT_LIMIT, SINGULAR, COLLISION, ALPHA = 0, 1, 2, 3, 4, 5
-REASONS = {
-    NO_IK: "out of reach (no inverse kinematics solution on the home branch)",
-    JOINT_LIMIT: "joint limit",
-    SINGULAR: "near a singularity",
-    COLLISION: "collision",
-    ALPHA: "printing angle alpha outside the allowed range",
-}
-
-
-ALPHA_MIN_STEP_MM = 0.1  # a depositing step shorter than this lays a dot, not a filament:
-# its direction (noise of the map-back at that length) does not constrain alpha
-
-
-def unit(v: np.ndarray) -> np.ndarray:
-    """Rows of ``v`` (..., 3) normalised (zero rows stay zero)."""
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n > 1e-12, n, 1.0)
-
-
-def any_perpendicular(n: np.ndarray) -> np.ndarray:
-    """A unit vector perpendicular to each unit row of ``n`` (..., 3)."""
-    ref = np.where(np.abs(n[..., :1]) < 0.9, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    return unit(np.cross(n, ref))
-
-
-def nozzle_axis(normal: np.ndarray, tangent: np.ndarray, tilt: np.ndarray,
-                lean: np.ndarray | None = None) -> np.ndarray:
-    """Nozzle axis (N, 3) unit: ``-normal`` tilted by ``tilt`` and leaned by ``lean`` (N,) rad.
-
-    With t the unit part of the tangent perpendicular to n and b = n x t:
-    axis = -cos(tilt) cos(lean) n + sin(tilt) t + cos(tilt) sin(lean) b.
-    The tilt turns the axis in the plane of the normal and the motion: alpha = alpha0 - tilt,
-    alpha0 = angle(-n, t) (90 deg when the motion lies in the layer). The lean turns it about
-    the motion direction and leaves alpha unchanged for motion in the layer. The deviation
-    from ``-normal`` is arccos(cos(tilt) cos(lean)).
-    """
-    t = tangent - np.einsum("ni,ni->n", tangent, normal)[:, None] * normal
-    bad = np.linalg.norm(t, axis=1) < 1e-9
-    t = np.where(bad[:, None], any_perpendicular(normal), unit(t))
-    ct = np.cos(tilt)[:, None]
-    axis = -ct * normal + np.sin(tilt)[:, None] * t
-    if lean is not None:
-        b = np.cross(normal, t)
-        axis = -ct * np.cos(lean)[:, None] * normal + np.sin(tilt)[:, None] * t \
-            + ct * np.sin(lean)[:, None] * b
-    return unit(axis)
-
-
-def alpha_of(axis: np.ndarray, tangent: np.ndarray) -> np.ndarray:
-    """Printing angle (N,) rad between nozzle axes and motion directions (N, 3)."""
-    c = np.einsum("ni,ni->n", unit(axis), unit(tangent))
-    return np.arccos(np.clip(c, -1.0, 1.0))
-
-
-def tool_rotation(axis: np.ndarray, psi: np.ndarray) -> np.ndarray:
-    """Tool orientations (N, 3, 3): z = ``axis``, x from the base x axis turned by ``psi`` rad."""
-    ref = np.where(np.abs(axis[:, :1]) < 0.95, [1.0, 0.0, 0.0], [0.0, 1.0, 0.0])
-    x0 = unit(ref - np.einsum("ni,ni->n", ref, axis)[:, None] * axis)
-    y0 = np.cross(axis, x0)
-    c, s = np.cos(psi)[:, None], np.sin(psi)[:, None]
-    x = c * x0 + s * y0
-    y = -s * x0 + c * y0
-    return np.stack([x, y, axis], axis=2)
-
-
-@dataclass(frozen=True)
-class Evaluation:
-    """A batch of tool poses checked for reachability.
-
-    Attributes:
-        q: (S, 6) float64, rad, joint solution on the home branch (nearest to ``q_ref``);
-            nan where no solution.
-        status: (S,) int8, OK or a reason code (NO_IK, JOINT_LIMIT, SINGULAR, COLLISION).
-        singular: (S,) float64, distance from the singularities (``singularity_margin``).
-        clearance: (S,) float64, mm (nan if not computed or no solution).
-        margin: (S,) float64, rad, smallest distance to a joint position limit.
-        pair: (S,) int32, index of the closest collision pair (into CollisionModel.names).
-    """
-
-    q: np.ndarray
-    status: np.ndarray
-    singular: np.ndarray
-    clearance: np.ndarray
-    margin: np.ndarray
-    pair: np.ndarray
-
-
-class Reach:
-    """Checks tool poses of one cell: IK branch of home, limits, singularity, clearance."""
-
-    def __init__(self, cell: CellConfig, collision: CollisionModel | None = None) -> None:
-        self.cell = cell
-        self.collision = collision if collision is not None else CollisionModel(cell)
-        self.home = np.radians(cell.robot.home_deg)
-        self.branch = int(kin.branch_of(self.home))
-        margin = np.radians(cell.planning.joint_margin_deg)
-        self.lo = np.radians(cell.robot.joint_min_deg)
-        self.hi = np.radians(cell.robot.joint_max_deg)
-        self.lo_safe = self.lo + margin
-        self.hi_safe = self.hi - margin
-        self.tool_m = cell.tool.tool_T.copy()
-        self.tool_m[:3, 3] /= 1000.0
-        self.tool_inv_m = np.linalg.inv(self.tool_m)
-
-    def solve(self, tcp_mm: np.ndarray, R: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
-        """IK on the home branch, each angle wrapped to the turn nearest ``q_ref`` (6,) or (S, 6).
-
-        Args:
-            tcp_mm: (S, 3) float64, mm, nozzle tip in the base frame.
-            R: (S, 3, 3) float64, tool orientations in the base frame.
-        Returns:
-            (S, 6) float64, rad; nan rows where there is no solution.
-        """
-        q = np.empty((len(tcp_mm), 6))
-        chunk = 16384  # cache-sized batches: large temporaries dominate otherwise
-        for start in range(0, len(tcp_mm), chunk):
-            sl = slice(start, start + chunk)
-            T = np.zeros((len(tcp_mm[sl]), 4, 4))
-            T[:, :3, :3] = R[sl]
-            T[:, :3, 3] = tcp_mm[sl] / 1000.0
-            T[:, 3, 3] = 1.0
-            q[sl] = kin.ik(T @ self.tool_inv_m, (self.branch,))[0][:, 0]
-        return self.wrap(q, q_ref)
-
-    def wrap(self, q: np.ndarray, q_ref: np.ndarray) -> np.ndarray:
-        """Each angle of ``q`` (S, 6) shifted by whole turns to lie within the joint limits,
-        nearest ``q_ref`` (6,) or (S, 6); the nearest turn if no shift fits."""
-        near = q + 2 * np.pi * np.round((q_ref - q) / (2 * np.pi))
-        cand = near[..., None] + 2 * np.pi * np.array([0.0, -1.0, 1.0])  # (S, 6, 3)
-        inside = (cand >= self.lo[:, None]) & (cand <= self.hi[:, None])
-        dist = np.abs(cand - np.broadcast_to(q_ref, q.shape)[..., None])
-        dist = np.where(inside, dist, dist + 1e6)
-        pick = np.argmin(dist, axis=-1)
-        return np.take_along_axis(cand, pick[..., None], axis=-1)[..., 0]
-
-    def check(
-        self, q: np.ndarray, clearance: bool = True, iters: int = 14
-    ) -> Evaluation:
-        """Status and margins of configurations ``q`` (S, 6) rad (nan rows = no IK)."""
-        S = len(q)
-        status = np.zeros(S, dtype=np.int8)
-        has = ~np.isnan(q).any(axis=1)
-        status[~has] = NO_IK
-        qs = np.where(has[:, None], q, self.home)
-        margin = np.minimum(qs - self.lo, self.hi - qs).min(axis=1)
-        limit = np.any((qs < self.lo_safe) | (qs > self.hi_safe), axis=1)
-        status[has & limit] = JOINT_LIMIT
-        singular = kin.singularity_margin(qs)
-        sing = singular < self.cell.planning.singular_margin
-        status[has & ~limit & sing] = SINGULAR
-        clear = np.full(S, np.nan)
-        pair = np.full(S, -1, dtype=np.int32)
-        if clearance and has.any():
-            c = self.collision.clearance(qs[has], iters=iters)
-            clear[has] = c.distance
-            pair[has] = c.pair
-            hit = has & (clear < self.cell.planning.clearance_mm)
-            status[hit & (status == OK)] = COLLISION
-        return Evaluation(q, status, singular, clear, margin, pair)
-
-    def cost(self, ev: Evaluation) -> np.ndarray:
-        """Margin cost (S,) of evaluated poses: inf if not OK, small with wide margins."""
-        c_clear = np.maximum(0.0, 1.0 - np.nan_to_num(ev.clearance, nan=1e3) / 50.0) ** 2
-        c_sing = np.maximum(0.0, 1.0 - ev.singular / 0.3) ** 2
-        c_joint = np.maximum(0.0, 1.0 - ev.margin / np.radians(30.0)) ** 2
-        cost = c_clear + c_sing + c_joint
-        return np.where(ev.status == OK, cost, np.inf)
+from planner.nozzle_axis import alpha_of, alpha_within, nozzle_axis, tool_rotation
+from planner.reach import ALPHA, COLLISION, JOINT_LIMIT, OK, Evaluation, Reach
 
 
 @dataclass(frozen=True)
@@ -244,31 +77,13 @@ def orientation_levels(cell: CellConfig, alpha0: np.ndarray, tilt_step_deg: floa
     """
     tilts = np.degrees(tilt_levels(cell, alpha0, tilt_step_deg))
     lmax = cell.planning.lean_max_deg
-    n = int(np.floor(lmax / lean_step_deg + 1e-9))
+    n = int(np.floor(lmax / lean_step_deg + tol.slack))
     leans = np.union1d(np.arange(-n, n + 1) * lean_step_deg, [0.0])
     T, L = np.meshgrid(tilts, leans, indexing="ij")
     T, L = T.ravel(), L.ravel()
     dev = np.degrees(np.arccos(np.cos(np.radians(T)) * np.cos(np.radians(L))))
     order = np.lexsort((-L, -T, np.abs(T), np.round(dev, 6)))
     return np.radians(np.stack([T[order], L[order]], axis=1))
-
-
-def alpha_allowed(cell: CellConfig, alpha: np.ndarray, extrude: np.ndarray) -> np.ndarray:
-    """(N,) bool: alpha (rad) is within the allowed range, or the sample does not extrude."""
-    lo, hi = np.radians([cell.planning.alpha_min_deg, cell.planning.alpha_max_deg])
-    return ~extrude | ((alpha >= lo - 1e-9) & (alpha <= hi + 1e-9))
-
-
-def alpha_within(cell: CellConfig, axis: np.ndarray, leave: np.ndarray, extrude: np.ndarray,
-                 arrive: np.ndarray | None) -> np.ndarray:
-    """(N,) bool: nozzle ``axis`` (N, 3) keeps alpha within range against the step leaving
-    each sample (``leave``, where ``extrude``) and the depositing step arriving at it
-    (``arrive``: (N, 3), zero rows where none deposits; None: not checked)."""
-    ok = alpha_allowed(cell, alpha_of(axis, leave), extrude)
-    if arrive is not None:
-        has = np.linalg.norm(arrive, axis=1) > 0.5
-        ok &= alpha_allowed(cell, alpha_of(axis, arrive), has)
-    return ok
 
 
 def _viterbi(cost: np.ndarray, grid: np.ndarray, weight: float) -> np.ndarray:
@@ -473,9 +288,9 @@ def choose(
             lean = lean + ramp(new_lean - lean, per_sample)
         # keep extruding samples' alpha in range: alpha = alpha0 - tilt
         tilt = np.where(extrude, np.clip(tilt, alpha0 - hi_a, alpha0 - lo_a), tilt)
-        changed = np.flatnonzero((np.abs(psi - old_psi) > 1e-12)
-                                 | (np.abs(tilt - old_tilt) > 1e-12)
-                                 | (np.abs(lean - old_lean) > 1e-12))
+        changed = np.flatnonzero((np.abs(psi - old_psi) > tol.zero)
+                                 | (np.abs(tilt - old_tilt) > tol.zero)
+                                 | (np.abs(lean - old_lean) > tol.zero))
         if len(changed):
             q_c, ev_c, ax_c = evaluate(changed, psi[changed], tilt[changed], lean[changed],
                                        q_ref[changed], 1)

@@ -29,7 +29,7 @@ import numpy as np
 from scipy.linalg import solve_banded
 
 from core.stages import Toolpath
-from planner.orientation import unit
+from planner.nozzle_axis import unit
 from planner.upright import turn_towards
 
 MIN_SEGMENT_MM = 1e-3  # repeated waypoints count as this far apart (no infinite coupling)

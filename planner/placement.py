@@ -19,17 +19,9 @@ from core.errors import InputError
 from core.stages import Toolpath
 from core.tolerance import tol
 from planner.cell import CellConfig, pose
-from planner.orientation import (
-    ALPHA,
-    COLLISION,
-    OK,
-    Reach,
-    alpha_of,
-    alpha_within,
-    nozzle_axis,
-    orientation_levels,
-    tool_rotation,
-)
+from planner.nozzle_axis import alpha_of, alpha_within, nozzle_axis, tool_rotation
+from planner.orientation import orientation_levels
+from planner.reach import ALPHA, COLLISION, OK, Reach
 from planner.refusal import Bends, Steps, bends, cause_of, downward, waypoint_steps
 from planner.samples import waypoint_tangents
 from planner.status import CAUSES, FIXES, Cause, Refused

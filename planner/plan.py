@@ -29,7 +29,8 @@ from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.continuity import SWING_TOL_MM, subdivide
 from planner.entry import safe_heights, safe_move
-from planner.orientation import OK, Orientation, Reach, alpha_of, choose
+from planner.nozzle_axis import alpha_of
+from planner.orientation import Orientation, choose
 from planner.path_smoothing import smooth_along_paths
 from planner.placement import Placement, bbox, choose_placement, fit_gel, model_transform
 from planner.plan_report import (
@@ -41,6 +42,7 @@ from planner.plan_report import (
     unreachable_message,
     upright_report,
 )
+from planner.reach import OK, Reach
 from planner.samples import (
     Samples,
     expand_timing,
@@ -49,7 +51,7 @@ from planner.samples import (
     resample,
     with_moves,
 )
-from planner.status import MESSAGES, Cause, PlanStatus
+from planner.status import MESSAGES, Cause, PlanStatus, TimingStatus
 from planner.timing import (
     Timing,
     angular_rates,
@@ -227,7 +229,7 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
         message = (f"the nozzle would leave the path by {split['worst_swing_mm']:.2f} mm between "
                    "two samples (a pose next to a singularity); move the part (placement) or "
                    "the robot base")
-    if timing.status != "ok" and status == PlanStatus.OK:
+    if timing.status != TimingStatus.OK and status == PlanStatus.OK:
         status, message = PlanStatus.TIME_LAW, timing.status
     with timer.stage("verify" + tag):
         # whatever the stages decided: the executed trajectory against every limit

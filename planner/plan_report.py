@@ -14,11 +14,13 @@ from typing import Any
 import numpy as np
 
 from core.stages import Toolpath
+from core.tolerance import tol
 from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.entry import TRANSFER, SafeMove
-from planner.orientation import COLLISION, OK, REASONS, Orientation, Reach
+from planner.orientation import Orientation
 from planner.placement import Placement
+from planner.reach import COLLISION, OK, REASONS, Reach
 from planner.refusal import cause_of
 from planner.samples import Samples
 from planner.status import CAUSES, Cause
@@ -33,7 +35,7 @@ class Unreachable:
 
     Attributes:
         count: unreachable toolpath waypoints.
-        by_reason: their count per reason (``orientation.REASONS``), in order of appearance.
+        by_reason: their count per reason (``reach.REASONS``), in order of appearance.
         runs: one entry per run of consecutive waypoints with one reason: first and last
             waypoint and the reason (with the colliding pair).
         between_waypoints: samples inserted between waypoints (long moves) that fail too.
@@ -108,7 +110,7 @@ def upright_report(up: Upright, orient: Orientation, main: np.ndarray) -> dict[s
     on the layer normals and along the planned motion (``main``: (M,) bool, the toolpath's
     samples, without entry and exit)."""
     margin = kin.singularity_margin(orient.q[main])
-    return {"samples": int(np.sum(up.angle > 1e-9)),
+    return {"samples": int(np.sum(up.angle > tol.floor)),
             "max_deg": round(float(np.degrees(up.angle.max())), 3) if len(up.angle) else 0.0,
             "comfort_margin": COMFORT,
             "margin_on_normal_min": round(float(up.margin.min()), 4) if len(up.margin) else 1.0,
@@ -165,22 +167,22 @@ def plan_report(
     # speed: actual TCP speed on the step after each sample vs target
     dt = np.diff(traj.t)
     step = np.linalg.norm(np.diff(traj.tcp, axis=0), axis=1)
-    v_step = step / np.maximum(dt, 1e-12)
-    ex_step = ex[:-1] & (step > 1e-6)  # zero-length steps (repeated waypoints) have no speed
+    v_step = step / np.maximum(dt, tol.zero)
+    ex_step = ex[:-1] & (step > tol.still)  # zero-length steps (repeated waypoints) have no speed
     # the toolpath speed varies linearly along a segment (resample), so a step's target is
     # the mean of its ends' speeds
     target_step = 0.5 * (samples.speed[:-1] + samples.speed[1:])
-    ratio = v_step[ex_step] / np.maximum(target_step[ex_step], 1e-12)
+    ratio = v_step[ex_step] / np.maximum(target_step[ex_step], tol.zero)
     # over-deposition: constant extrusion C for longer than the toolpath speed asks; C is the
     # job's (its profile's, through eq. 4: W H v = C at every extruding waypoint)
     C = float(np.median((toolpath.width * toolpath.height * toolpath.speed)[toolpath.extrude])
               ) if toolpath.extrude.any() else 0.0
-    planned = step[ex_step] / np.maximum(target_step[ex_step], 1e-12)
+    planned = step[ex_step] / np.maximum(target_step[ex_step], tol.zero)
     extra = np.maximum(dt[ex_step] - planned, 0.0) * C
     slowed = ratio < 0.95
     q_deg = np.degrees(traj.q)
     lo, hi = np.array(cell.robot.joint_min_deg), np.array(cell.robot.joint_max_deg)
-    acc = np.abs(np.diff(traj.qd, axis=0)) / np.maximum(dt, 1e-12)[:, None]
+    acc = np.abs(np.diff(traj.qd, axis=0)) / np.maximum(dt, tol.zero)[:, None]
     out: dict[str, Any] = {
         "waypoints": len(toolpath),
         "samples": len(traj),
@@ -195,10 +197,10 @@ def plan_report(
         "min_clearance_time_s": float(traj.t[k]) if k >= 0 else None,
         "required_clearance_mm": cell.planning.clearance_mm,
         "alpha_deg": {**stats(traj.alpha[ex]),
-                      "tilted_samples": int(np.sum(np.abs(orient.tilt[ex]) > 1e-6)),
+                      "tilted_samples": int(np.sum(np.abs(orient.tilt[ex]) > tol.still)),
                       "tilt_max_deg": float(np.degrees(np.abs(orient.tilt).max()))},
         "lean_deg": {**stats(np.degrees(orient.lean[ex])),
-                     "leaned_samples": int(np.sum(np.abs(orient.lean[ex]) > 1e-6)),
+                     "leaned_samples": int(np.sum(np.abs(orient.lean[ex]) > tol.still)),
                      "lean_max_deg": float(np.degrees(np.abs(orient.lean).max())),
                      "limit_deg": cell.planning.lean_max_deg},
         "deviation_deg": stats(np.degrees(np.arccos(np.clip(
@@ -218,12 +220,12 @@ def plan_report(
                         # the same by extruded length (short steps at a turn weigh less)
                         "within_5pct_length": float(
                             np.sum(step[ex_step] * (np.abs(ratio - 1) <= 0.05))
-                            / max(float(step[ex_step].sum()), 1e-12)) if len(ratio) else 1.0},
+                            / max(float(step[ex_step].sum()), tol.zero)) if len(ratio) else 1.0},
         "over_deposition": {
             "volume_mm3": float(extra.sum()),
-            "fraction": float(extra.sum() / max(C * planned.sum(), 1e-12)),
+            "fraction": float(extra.sum() / max(C * planned.sum(), tol.zero)),
             "slowed_steps": int(slowed.sum()),
-            "max_local_factor": float(1.0 / max(ratio.min(), 1e-12)) if len(ratio) else 1.0,
+            "max_local_factor": float(1.0 / max(ratio.min(), tol.zero)) if len(ratio) else 1.0,
         },
         "unreachable": unreached.as_report(),
         "time_law": {"status": timing.status, "iterations": timing.iterations},

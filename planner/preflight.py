@@ -20,8 +20,9 @@ import numpy as np
 
 from core.stages import Toolpath
 from planner.cell import CellConfig
-from planner.orientation import COLLISION, OK, REASONS, Reach, tool_rotation
+from planner.nozzle_axis import tool_rotation
 from planner.placement import _fits, fit_gel, model_transform
+from planner.reach import COLLISION, OK, REASONS, Reach
 from slicer.config import UNIT_SCALE_MM, JobConfig
 from slicer.critical import CriticalSelection, select_critical_regions
 from slicer.mesh_io import Surface

@@ -19,14 +19,9 @@ import numpy as np
 
 from core.stages import Toolpath
 from planner.cell import CellConfig
-from planner.orientation import (
-    ALPHA,
-    COLLISION,
-    alpha_of,
-    alpha_within,
-    nozzle_axis,
-    orientation_levels,
-)
+from planner.nozzle_axis import alpha_of, alpha_within, nozzle_axis
+from planner.orientation import orientation_levels
+from planner.reach import ALPHA, COLLISION
 from planner.samples import resample
 from planner.status import Cause
 

@@ -19,16 +19,9 @@ from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.continuity import Subdivision
 from planner.entry import TRANSFER, SafeMove, joint_segment, move_speed
-from planner.orientation import (
-    ALPHA,
-    ALPHA_MIN_STEP_MM,
-    OK,
-    Orientation,
-    Reach,
-    alpha_allowed,
-    alpha_of,
-    unit,
-)
+from planner.nozzle_axis import ALPHA_MIN_STEP_MM, alpha_allowed, alpha_of, unit
+from planner.orientation import Orientation
+from planner.reach import ALPHA, OK, Reach
 from planner.timing import Timing
 
 
@@ -153,7 +146,7 @@ def moving_samples(q: np.ndarray) -> np.ndarray:
     """(M,) bool: False for samples whose joints equal the previous sample's (to 1e-6 rad)."""
     keep = np.ones(len(q), dtype=bool)
     if len(q) > 1:
-        keep[1:] = np.abs(np.diff(q, axis=0)).max(axis=1) > 1e-6
+        keep[1:] = np.abs(np.diff(q, axis=0)).max(axis=1) > tol.still
     return keep
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 from enum import StrEnum
 
 from core.errors import InputError
+from core.status import Status
 
 
 class PlanStatus(StrEnum):
@@ -102,3 +103,14 @@ class Refused(InputError):
         super().__init__(problem, fix)
         self.cause = cause
         self.waypoint = waypoint
+
+
+class TimingStatus(Status):
+    """The time law's outcome (``planner.timing.Timing.status``, report.json ``time_law``).
+
+    A failure's text adds how many passes were made (``"<value> after N passes"``).
+    """
+
+    OK = "ok", "every joint's acceleration keeps within its limit"
+    ACCELERATION = ("acceleration limit not met",
+                    "slowing down did not bring the joint accelerations within their limits")

@@ -19,7 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from core.tolerance import tol
 from planner import kinematics as kin
+from planner.status import TimingStatus
 
 
 @dataclass(frozen=True)
@@ -101,7 +103,7 @@ def task_rates(
         n = _null_vector(J, a, lam2)
         spin_per_n = np.einsum("mi,mij,mj->m", a, J[:, 3:, :], n)
         spin_task = np.einsum("mi,mij,mj->m", a, J[:, 3:, :], qd_task)
-        usable = np.abs(spin_per_n) > 1e-9
+        usable = np.abs(spin_per_n) > tol.floor
         spin_err = np.einsum("mi,mi->m", a, w) - spin_task
         z = np.where(usable, spin_err / np.where(usable, spin_per_n, 1.0), 0.0)
         out[sl] = qd_task + z[:, None] * n
@@ -125,7 +127,7 @@ def angular_rates(R: np.ndarray, s: np.ndarray | None = None) -> np.ndarray:
     angle = np.arccos(cos)
     v = np.stack([W[:, 2, 1] - W[:, 1, 2], W[:, 0, 2] - W[:, 2, 0], W[:, 1, 0] - W[:, 0, 1]], 1)
     s = np.sin(angle)
-    scale = np.where(s > 1e-9, angle / (2 * np.where(s > 1e-9, s, 1.0)), 0.5)
+    scale = np.where(s > tol.floor, angle / (2 * np.where(s > tol.floor, s, 1.0)), 0.5)
     return v * scale[:, None] / steps[:, None]
 
 
@@ -170,7 +172,7 @@ def window_derivative(y: np.ndarray, s: np.ndarray, h: float) -> np.ndarray:
         return np.gradient(y, s, axis=0) if len(s) > 1 else np.zeros_like(y)
     lo = np.maximum(s - h, s[0])
     hi = np.minimum(s + h, s[-1])
-    span = np.maximum(hi - lo, 1e-12)
+    span = np.maximum(hi - lo, tol.zero)
     out = np.empty_like(y)
     for j in range(y.shape[1]):  # a loop over the columns (six joints), not the samples
         out[:, j] = (np.interp(hi, s, y[:, j]) - np.interp(lo, s, y[:, j])) / span
@@ -210,38 +212,38 @@ def time_law(
         # one step from rest to rest: the slowest of speed, velocity and bang-bang bounds
         step = np.abs(q[1] - q[0])
         length = float(np.linalg.norm(tcp_mm[1] - tcp_mm[0]))
-        dt1 = max(length / max(float(target[0]), 1e-9), float(np.max(step / vmax)),
-                  float(np.max(2.0 * np.sqrt(step / amax))), 1e-6)
+        dt1 = max(length / max(float(target[0]), tol.floor), float(np.max(step / vmax)),
+                  float(np.max(2.0 * np.sqrt(step / amax))), MIN_DT)
         z = np.zeros((2, 6))
         return Timing(np.array([0.0, dt1]), z, np.zeros(2), target, np.zeros(2, bool), 0, "ok")
     ddq = window_derivative(dq, s, CURVATURE_WINDOW_MM)  # rad/mm^2, see the constant
     ds = np.diff(s)
     safety = 0.98
     # velocity caps on x = sdot^2 (mm/s)^2: TCP speed and joint speed
-    x_speed = np.where(dp > 1e-9, (target / np.maximum(dp, 1e-9)) ** 2, np.inf)
-    x_joint = np.min((safety * vmax / np.maximum(np.abs(dq), 1e-12)) ** 2, axis=1)
+    x_speed = np.where(dp > tol.floor, (target / np.maximum(dp, tol.floor)) ** 2, np.inf)
+    x_joint = np.min((safety * vmax / np.maximum(np.abs(dq), tol.zero)) ** 2, axis=1)
     # the curvature term q'' sdot^2 may use at most half the acceleration budget
-    x_curv = np.min(0.5 * safety * amax / np.maximum(np.abs(ddq), 1e-12), axis=1)
+    x_curv = np.min(0.5 * safety * amax / np.maximum(np.abs(ddq), tol.zero), axis=1)
     cap = np.minimum(np.minimum(x_speed, x_joint), x_curv)
     # The robot moves linearly in joint space between samples, so each step must keep
     # |dq| / dt within the limits whatever the rates above say (a spin or lean changed at
     # one place, a pose next to a singularity): with both ends of a step below this cap,
     # dt = 2 ds / (sdot_k + sdot_k+1) >= |dq| / (safety vmax).
     x_step = np.min((safety * vmax * np.diff(s)[:, None]
-                     / np.maximum(np.abs(np.diff(q, axis=0)), 1e-12)) ** 2, axis=1)
+                     / np.maximum(np.abs(np.diff(q, axis=0)), tol.zero)) ** 2, axis=1)
     cap[:-1] = np.minimum(cap[:-1], x_step)
     cap[1:] = np.minimum(cap[1:], x_step)
     cap = np.minimum(cap, 1e12)
     cap[0] = cap[-1] = 0.0
     if stop is not None:
         cap[np.asarray(stop, dtype=bool)] = 0.0
-    status = "ok"
+    status: str = TimingStatus.OK
     it = 0
     while True:  # a few passes, each fully vectorised
         it += 1
         # acceleration left for sddot: (amax - |q''| x) / |q'|, mm/s^2
         budget = np.min(
-            (safety * amax - np.abs(ddq) * cap[:, None]) / np.maximum(np.abs(dq), 1e-12), axis=1
+            (safety * amax - np.abs(ddq) * cap[:, None]) / np.maximum(np.abs(dq), tol.zero), axis=1
         )
         budget = np.maximum(budget, 0.0)
         inc = 2.0 * budget[:-1] * ds  # x_{k+1} - x_k <= 2 sddot ds
@@ -250,9 +252,9 @@ def time_law(
         x = np.maximum(x, 0.0)
         sd = np.sqrt(x)
         # at least MIN_DT per step: t (up to ~1e5 s on a long job) must visibly increase
-        dt = np.maximum(2.0 * ds / np.maximum(sd[:-1] + sd[1:], 1e-12), MIN_DT)
+        dt = np.maximum(2.0 * ds / np.maximum(sd[:-1] + sd[1:], tol.zero), MIN_DT)
         # a step between two rests: from rest to rest with the acceleration budget
-        both = (sd[:-1] + sd[1:]) < 1e-9
+        both = (sd[:-1] + sd[1:]) < tol.floor
         if both.any():
             acc_s = np.maximum(np.minimum(budget[:-1], budget[1:])[both], 1e-6)
             dt[both] = np.maximum(2.0 * np.sqrt(ds[both] / acc_s), MIN_DT)
@@ -263,7 +265,7 @@ def time_law(
         if not over.any():
             break
         if it >= max_iter:
-            status = f"acceleration limit not met after {max_iter} passes"
+            status = f"{TimingStatus.ACCELERATION} after {max_iter} passes"
             break
         # shrink the caps at both ends of each offending step and try again
         shrink = np.ones(M)
@@ -293,5 +295,5 @@ def path_parameter(tcp_mm: np.ndarray, R: np.ndarray) -> np.ndarray:
     cos = np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
     # TCP travel where the TCP moves (so |dp/ds| = 1 and speeds are exact); rotation only
     # where it does not
-    ds = np.where(step > 1e-3, step, np.maximum(ROTATION_MM_PER_RAD * np.arccos(cos), 1e-6))
+    ds = np.where(step > 1e-3, step, np.maximum(ROTATION_MM_PER_RAD * np.arccos(cos), tol.still))
     return np.concatenate([[0.0], np.cumsum(ds)])

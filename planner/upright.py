@@ -33,7 +33,9 @@ import numpy as np
 
 from core.tolerance import tol
 from planner import kinematics as kin
-from planner.orientation import Reach, alpha_within, ramp, tool_rotation, unit
+from planner.nozzle_axis import alpha_within, tool_rotation, unit
+from planner.orientation import ramp
+from planner.reach import Reach
 
 COMFORT = 0.2  # singularity margin (0 singular, ~1 far) below which the nozzle is uprighted
 STEP_DEG = 5.0  # candidate upright angles: STEP_DEG, 2 STEP_DEG, ... upright_max_deg

@@ -23,7 +23,8 @@ import numpy as np
 
 from core.tolerance import tol
 from planner import kinematics as kin
-from planner.orientation import ALPHA_MIN_STEP_MM, Reach, alpha_of
+from planner.nozzle_axis import ALPHA_MIN_STEP_MM, alpha_of
+from planner.reach import Reach
 from planner.status import PlanStatus
 from planner.trajectory import Trajectory
 
@@ -170,7 +171,7 @@ def verify(traj: Trajectory, target_speed: np.ndarray, reach: Reach) -> Verifica
     # TCP speed on depositing steps: never faster than asked (target varies linearly)
     v = length / np.maximum(dt, tol.zero) if M > 1 else np.zeros(0)
     target = 0.5 * (target_speed[:-1] + target_speed[1:])
-    moving = traj.extrude[:-1] & (length > 1e-6)
+    moving = traj.extrude[:-1] & (length > tol.still)
     ratio = np.where(moving, v / np.maximum(target, tol.zero), 0.0)
     tcp_ratio = float(ratio.max()) if len(ratio) else 0.0
     over = ratio > 1.0 + SPEED_TOL

@@ -394,7 +394,7 @@ def deposit(toolpath: Toolpath, morphology: Morphology,
     residual = sum(t.residual_mm3 for t in traces)
     fill.setflags(write=False)
     tags.setflags(write=False)
-    status = (DepositionStatus.OK if residual <= 1e-6 * max(float(seg.volume.sum()), 1.0)
+    status = (DepositionStatus.OK if residual <= tol.computed * max(float(seg.volume.sum()), 1.0)
               else DepositionStatus.OVERFULL)
     return Deposit(grid=grid, fill=fill, layer=tags, commanded_mm3=float(seg.volume.sum()),
                    status=status, trace=tuple(traces), timings=timings, segments=total)

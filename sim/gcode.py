@@ -186,7 +186,7 @@ def _arc(start: NDArray[np.float64], end: NDArray[np.float64], i: float, j: floa
         sweep -= 2 * math.pi
     elif not clockwise and sweep <= 0:
         sweep += 2 * math.pi
-    n = max(2, math.ceil(abs(sweep) * max(r, 1e-9) / step) + 1)
+    n = max(2, math.ceil(abs(sweep) * max(r, tol.floor) / step) + 1)
     a = a0 + np.linspace(0.0, sweep, n)
     pts = np.column_stack([c[0] + r * np.cos(a), c[1] + r * np.sin(a),
                            np.linspace(start[2], end[2], n)])
@@ -199,7 +199,7 @@ def _to_toolpath(rows: NDArray[np.float64], opt: GcodeOptions) -> Toolpath:
     vol, feed, kind = rows[:, 6], rows[:, 7], rows[:, 8].astype(np.int8)
     length = np.linalg.norm(end - start, axis=1)
     # A new path wherever a move does not start where the previous one ended.
-    brk = np.r_[True, np.linalg.norm(start[1:] - end[:-1], axis=1) > 1e-6]
+    brk = np.r_[True, np.linalg.norm(start[1:] - end[:-1], axis=1) > tol.still]
     path_of_move = np.cumsum(brk) - 1
     # Layers: Z levels of extruding moves, new layer whenever Z rises.
     z = end[:, 2]

@@ -109,7 +109,7 @@ def _error_map(path: Path, quality: Quality, title: str, limit_mm: float | None,
         sc = ax3.scatter(pts[:, 0], pts[:, 1], pts[:, 2], c=np.clip(d, -lim, lim), s=3,
                          cmap="coolwarm", vmin=-lim, vmax=lim)
         ax3.view_init(elev=elev, azim=azim)
-        ax3.set_box_aspect(tuple(np.ptp(pts, axis=0) + 1e-9))
+        ax3.set_box_aspect(tuple(np.ptp(pts, axis=0) + tol.floor))
         ax3.set_axis_off()
         _scale_bar(ax3, pts)
     fig.colorbar(sc, cax=fig.add_subplot(grid[0, 2]),

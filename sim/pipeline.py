@@ -35,6 +35,7 @@ from sim.baseline_prints import BaselineOptions, flushed, gcode_print, planar_pr
 from sim.deposition import Deposit, DepositionConfig, covering_grid, deposit
 from sim.inspect_figures import ct_slices, error_map, layer_plot, slowdown_plot
 from sim.metrics import Quality, inspect_deposit
+from sim.print_summary import PrintSummary
 from sim.voxel_choice import NoNotes, Notes, auto_voxel
 from slicer.extrusion import PROFILE_FILE, ExtrusionProfile, load_profile
 from slicer.profiles import FACTORY
@@ -84,7 +85,7 @@ class Inspection(NamedTuple):
     """
 
     section: dict[str, Any]
-    columns: list[tuple[str, dict[str, Any]]]
+    columns: list[tuple[str, PrintSummary]]
 
 
 def inspect_job(job: Path, options: InspectOptions, progress: Progress | None = None,
@@ -135,7 +136,8 @@ def inspect_job(job: Path, options: InspectOptions, progress: Progress | None = 
     base = _baseline(job, options.baseline, toolpath, morphology, vertices, faces, config,
                      timer, section)
     if base is not None:
-        section["comparison"] = comparison(result.summary, base.summary)
+        section["comparison"] = comparison(PrintSummary.from_dict(result.summary),
+                                           PrintSummary.from_dict(base.summary))
     if options.figures:
         with timer.stage("figures"):
             section["figures"] = figures(job, result, base)
@@ -144,13 +146,15 @@ def inspect_job(job: Path, options: InspectOptions, progress: Progress | None = 
                 section["figures"].append(slowdown_figure(job, slowed, synced))
     section["timing_s"] = {k: round(v, 3) for k, v in timer.seconds.items()}
     update_report(job, {"inspect": section})
-    columns = [("multi-axis", result.summary)]
+    columns = [("multi-axis", PrintSummary.from_dict(result.summary))]
     if "as_planned" in section:
-        columns.append(("as planned", section["as_planned"]))
+        columns.append(("as planned", PrintSummary.from_dict(section["as_planned"])))
     if "baselines" in section:
-        columns += [(f"planar-{m}", b) for m, b in section["baselines"].items()]
+        columns += [(f"planar-{m}", PrintSummary.from_dict(b))
+                    for m, b in section["baselines"].items()]
     elif base is not None:
-        columns.append((section["baseline"].get("kind", "baseline"), base.summary))
+        columns.append((section["baseline"].get("kind", "baseline"),
+                        PrintSummary.from_dict(base.summary)))
     return Inspection(section, columns)
 
 
@@ -275,18 +279,18 @@ def slowdown_figure(job: Path, slow: Slowdown, synced: bool) -> str:
                          slow.extra_mm3, SLOWED, synced).name
 
 
-def comparison(main: dict[str, Any], base: dict[str, Any]) -> dict[str, Any]:
+def comparison(main: PrintSummary, base: PrintSummary) -> dict[str, Any]:
     """Side by side with the paper's measurements (section 5.3, aorta and socket prints)."""
     return {
-        "surface_error_mean_mm": {"multi_axis": main["surface_error_mm"]["mean"],
-                                  "baseline": base["surface_error_mm"]["mean"],
+        "surface_error_mean_mm": {"multi_axis": main.surface_error_mm["mean"],
+                                  "baseline": base.surface_error_mm["mean"],
                                   "paper_multi_axis": 0.20, "paper_planar": 0.49},
-        "infill_ratio": {"multi_axis": main["infill_ratio"], "baseline": base["infill_ratio"]},
-        "interior_infill_ratio": {"multi_axis": main["interior_infill_ratio"],
-                                  "baseline": base["interior_infill_ratio"],
+        "infill_ratio": {"multi_axis": main.infill_ratio, "baseline": base.infill_ratio},
+        "interior_infill_ratio": {"multi_axis": main.interior_infill_ratio,
+                                  "baseline": base.interior_infill_ratio,
                                   "paper_multi_axis": 0.9947},
-        "pore_ratio": {"multi_axis": main["pore_ratio"], "baseline": base["pore_ratio"],
+        "pore_ratio": {"multi_axis": main.pore_ratio, "baseline": base.pore_ratio,
                        "paper_multi_axis": 0.0025},
-        "over_deposition": {"multi_axis": main["over_deposition"],
-                            "baseline": base["over_deposition"]},
+        "over_deposition": {"multi_axis": main.over_deposition,
+                            "baseline": base.over_deposition},
     }

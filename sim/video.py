@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.stages import Toolpath
+from core.tolerance import tol
 from planner.flow import segment_speeds
 from planner.trajectory import Trajectory
 from sim.as_planned import SLOWED
@@ -54,7 +55,7 @@ class VideoResult:
     @property
     def render_s_per_print_min(self) -> float:
         """Wall seconds of rendering per minute of print."""
-        return self.render_s / max(self.print_s / 60.0, 1e-9)
+        return self.render_s / max(self.print_s / 60.0, tol.floor)
 
 
 @dataclass(frozen=True)

@@ -9,6 +9,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from core.tolerance import tol
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
 # Share of the layer vertices with H outside the profile above which the job is flagged.
@@ -97,7 +98,7 @@ def job_notes(report: Mapping[str, Any]) -> list[str]:
     error = toolpath.get("volume_error")
     if error is not None and abs(float(error)) > VOLUME_ERROR:
         narrowest = toolpath.get("width_over_profile", {}).get("min")
-        if float(error) > 0 and narrowest is not None and narrowest <= THINNEST + 1e-6:
+        if float(error) > 0 and narrowest is not None and narrowest <= THINNEST + tol.computed:
             # lines already at the narrowest width the nozzle speed can give, still too much
             # ink: the part has walls or features thinner than one filament
             notes.append(

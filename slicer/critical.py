@@ -205,7 +205,7 @@ def select_critical_regions(
                 continue
             if sel.where:
                 centre = (ops.vertices[bnd.faces[idx]].mean(axis=1) * area[:, None]).sum(
-                    axis=0) / max(float(area.sum()), 1e-300)
+                    axis=0) / max(float(area.sum()), tol.tiny)
                 if not sel.accepts(centre):
                     elsewhere += 1
                     taken[idx] = False  # a later selector may still take these faces

@@ -14,6 +14,7 @@ from matplotlib.collections import LineCollection
 
 from core.figure_style import integer_ticks, legend_below, legend_outside, style, value_limits
 from core.stages import Layers
+from core.tolerance import tol
 
 
 def height_histogram(
@@ -81,7 +82,7 @@ def convergence(o_align: Sequence[float], height_std: Sequence[float], path: Pat
     with style():
         fig, ax = plt.subplots(figsize=(7.2, 4.0), dpi=120)
         its = np.arange(len(o_align))
-        handles = ax.semilogy(its, np.maximum(np.asarray(o_align, float), 1e-300), "o-",
+        handles = ax.semilogy(its, np.maximum(np.asarray(o_align, float), tol.tiny), "o-",
                               color="tab:red", label="O_align (alignment objective)")
         ax.set_xlabel("iteration")
         ax.set_ylabel("O_align (dimensionless)", color="tab:red")

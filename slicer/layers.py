@@ -106,7 +106,7 @@ def slab_bounds(iso: np.ndarray, g_min: float, g_max: float) -> np.ndarray:
     for k, c in enumerate(iso):  # one step per layer
         b[k + 1] = 2.0 * c - b[k]
     span = max(g_max - g_min, tol.zero)
-    if np.all(np.diff(b) > 0) and abs(b[-1] - g_max) <= 1e-6 * span:
+    if np.all(np.diff(b) > 0) and abs(b[-1] - g_max) <= tol.computed * span:
         b[-1] = g_max
         return b
     if len(iso) < 2:
@@ -281,7 +281,7 @@ def iso_surfaces(mesh: TetOperators | TetMesh, field: Field,
         # Area weights, with a floor so a vertex touched only by sliver faces still gets the
         # mean gradient of its tets.
         area = 0.5 * np.linalg.norm(normal, axis=1)
-        area = area + 1e-9 * float(area.mean()) + tol.zero
+        area = area + tol.floor * float(area.mean()) + tol.zero
         corner = faces.ravel()
         nv = len(verts)
         wsum = np.bincount(corner, weights=np.repeat(area, 3), minlength=nv)
@@ -438,7 +438,7 @@ def _critical_report(result: FieldResult, spacing: LayerSpacing) -> list[dict[st
             "on_one_layer": len(slots) == 1,
             # the region is the top (end) or bottom (start) face of a whole layer's slab
             "on_slab_boundary": bool(len(bounds) and
-                                     np.min(np.abs(bounds - g_region)) <= 1e-9 * span),
+                                     np.min(np.abs(bounds - g_region)) <= tol.slack * span),
         })
     return out
 

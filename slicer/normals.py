@@ -12,12 +12,13 @@ from dataclasses import replace
 import numpy as np
 
 from core.stages import Toolpath
+from core.tolerance import tol
 
 
 def _unit(v: np.ndarray) -> np.ndarray:
     """Rows of ``v`` (..., 3) normalised (zero rows stay zero)."""
     n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return v / np.where(n > 1e-12, n, 1.0)
+    return v / np.where(n > tol.zero, n, 1.0)
 
 
 def repair_normals(toolpath: Toolpath, spike_deg: float = 20.0,

@@ -21,6 +21,7 @@ from core.errors import InputError
 from core.progress import Progress, StageTimer
 from core.report import update_report
 from core.stages import TetMesh
+from core.tolerance import tol
 from slicer.budget import check_budget
 from slicer.config import JobConfig
 from slicer.mesh_io import Surface
@@ -173,7 +174,7 @@ def _slice(
     report = {
         "layers": extraction.layers.layer_count,
         "iterations": int(result.iterations),
-        "status": result.status,
+        "status": result.status_text,
         "planar": job.slicing.planar,
         "critical_regions": extraction.critical_report,
         "height_mm": final_stats.as_dict(),
@@ -292,7 +293,7 @@ def _slab_check(slab: np.ndarray, report: dict[str, Any]) -> dict[str, Any]:
         if 0 <= k < len(slab):
             required[k] = float(entry["required_mm3"])
             entry["slab_mm3"] = float(slab[k])
-    rel = np.abs(required - slab) / np.maximum(slab, 1e-9)
+    rel = np.abs(required - slab) / np.maximum(slab, tol.floor)
     worst = int(np.argmax(np.abs(required - slab)))
     return {
         "slab_sum_mm3": float(slab.sum()),

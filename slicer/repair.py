@@ -20,6 +20,7 @@ import numpy as np
 import trimesh
 
 from core.errors import InputError
+from core.tolerance import tol
 from slicer.config import ModelConfig
 from slicer.mesh_io import Surface, load_surface
 
@@ -117,7 +118,7 @@ def load_repaired(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
                 "Toolbox, Meshmixer)") from exc
     # mm per file unit as loaded: the units and any --scale-to
     scale = (float(np.ptp(np.asarray(surface.vertices), axis=0).max())
-             / max(float(np.ptp(vertices, axis=0).max()), 1e-300))
+             / max(float(np.ptp(vertices, axis=0).max()), tol.tiny))
     line = (f"--repair: filled {fill.holes} hole{'s' if fill.holes != 1 else ''} "
             f"({fill.open_edges} open edges, largest {fill.largest_perimeter * scale:.1f} mm "
             f"round), added {fill.area_added * scale**2:.0f} mm^2 of surface")

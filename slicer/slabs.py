@@ -13,6 +13,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from core.tolerance import tol
+
 SCALE_LIMITS = (0.5, 1.5)  # a layer whose H misses its slab by more is left at the limit
 
 
@@ -70,7 +72,7 @@ def slab_volumes(vertices: NDArray[np.float64], tets: NDArray[np.integer],
     gv = np.sort(g[t_idx], axis=1)
     span = gv[:, 3] - gv[:, 0]
     # distinct values: nudge ties apart (their order is kept, so the nudge only grows gaps)
-    eps = 1e-8 * np.maximum(span, 1e-12)
+    eps = 1e-8 * np.maximum(span, tol.zero)
     gv = gv + eps[:, None] * np.arange(4.0)
     # volume below each bound: whole tets under it plus the fraction of tets it cuts
     below = np.zeros(len(b))

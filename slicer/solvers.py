@@ -22,6 +22,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 
+from core.tolerance import tol
+from slicer.status import SolverStatus
+
 Method = Literal["auto", "cholespy", "amg", "cg", "splu"]
 AMG_SEED = 0  # of the random start vectors pyamg's setup draws
 DIRECT_MAX_UNKNOWNS = 20_000
@@ -37,13 +40,20 @@ def _fallbacks(method: Method, n: int) -> tuple[str, ...]:
     return (method, *(m for m in ("amg", "splu", "cg") if m != method))
 
 
+def _finite_status(x: np.ndarray) -> str:
+    """``ok``, or ``failed:non-finite`` when a direct solve returned nan or inf."""
+    return SolverStatus.OK if np.all(np.isfinite(x)) else SolverStatus.FAILED.with_detail(
+        "non-finite")
+
+
 class SPDSolver:
     """Set up (factor or build a preconditioner for) an SPD matrix once; solve many times.
 
     Attributes:
         n: int, size of the system.
         backend: the backend in use ("cholespy", "amg", "cg", "splu"), or "" if none worked.
-        status: "ok", "fallback:<why>" (a later backend is in use) or "failed:<why>".
+        status: str, a ``SolverStatus`` text: "ok", "fallback:<why>" (a later backend is in
+            use) or "failed:<why>".
         notes: list of str, one per backend that was tried and failed.
         iterations: int, total Krylov iterations of all solves so far (iterative backends).
     """
@@ -63,7 +73,7 @@ class SPDSolver:
         self._perm: np.ndarray | None = None
         self.rtol = rtol
         self.backend = ""
-        self.status = "failed:no backend"
+        self.status: str = SolverStatus.FAILED.with_detail("no backend")
         self.notes: list[str] = []
         self.iterations = 0
         self._matrix = a
@@ -87,10 +97,11 @@ class SPDSolver:
                 self.notes.append(f"{name}: {type(exc).__name__}: {exc}")
                 continue
             self.backend = name
-            self.status = "ok" if not self.notes else f"fallback:{self.notes[-1]}"
+            self.status = (SolverStatus.OK if not self.notes
+                           else SolverStatus.FALLBACK.with_detail(self.notes[-1]))
             break
         else:
-            self.status = "failed:" + "; ".join(self.notes)
+            self.status = SolverStatus.FAILED.with_detail("; ".join(self.notes))
 
     @property
     def ok(self) -> bool:
@@ -120,7 +131,7 @@ class SPDSolver:
             out = np.empty_like(probe)
             solver.solve(np.ascontiguousarray(a @ probe), out)
             err = np.abs(out - probe).max()
-            if not np.isfinite(err) or err > 1e-6:
+            if not np.isfinite(err) or err > tol.computed:
                 raise ValueError(f"factorization inaccurate (error {err:.1e}; not SPD?)")
             return solver
         if name == "amg":
@@ -153,8 +164,8 @@ class SPDSolver:
             x0: optional initial guess with b's shape (used by the iterative backends).
 
         Returns:
-            (x with b's shape, status): "ok", "not_converged" (iterative backend hit its cap;
-            x is the last iterate) or "failed:<why>" (x is NaN).
+            (x with b's shape, status): a ``SolverStatus`` text, "ok", "not_converged"
+            (iterative backend hit its cap; x is the last iterate) or "failed:<why>" (x is NaN).
         """
         rhs = np.ascontiguousarray(b, dtype=np.float64)
         if self._perm is not None:
@@ -169,18 +180,18 @@ class SPDSolver:
         if not self.ok:
             return np.full_like(rhs, np.nan), self.status
         if self.n == 0:
-            return rhs.copy(), "ok"
+            return rhs.copy(), SolverStatus.OK
         if self.backend == "cholespy":
             out = np.empty_like(rhs)
             self._impl.solve(rhs, out)  # type: ignore[attr-defined]
-            return out, "ok" if np.all(np.isfinite(out)) else "failed:non-finite"
+            return out, _finite_status(out)
         if self.backend == "splu":
             out = self._impl.solve(rhs)  # type: ignore[attr-defined]
-            return out, "ok" if np.all(np.isfinite(out)) else "failed:non-finite"
+            return out, _finite_status(out)
         cols = rhs.reshape(self.n, -1)
         guess = None if x0 is None else np.asarray(x0, dtype=np.float64).reshape(self.n, -1)
         out = np.empty_like(cols)
-        status = "ok"
+        status: str = SolverStatus.OK
         count = [0]
 
         def tick(_: np.ndarray) -> None:
@@ -193,6 +204,6 @@ class SPDSolver:
                               maxiter=maxiter, M=self._impl, callback=tick)
             out[:, k] = x
             if info != 0 or not np.all(np.isfinite(x)):
-                status = "not_converged"
+                status = SolverStatus.NOT_CONVERGED
         self.iterations += count[0]
         return out.reshape(rhs.shape), status

@@ -200,6 +200,7 @@ def _summary(job_dir: Path, printing_s: float = 0.0, time_scale: float = 0.0) ->
     """The job's numbers; ``printing_s`` (wall s spent printing) gives the pace the twin kept
     against the ``time_scale`` asked."""
     from core.report import read_report
+    from planner.plan_summary import PlanSummary
 
     report = read_report(job_dir)
     rows = []
@@ -227,7 +228,7 @@ def _summary(job_dir: Path, printing_s: float = 0.0, time_scale: float = 0.0) ->
     )
     plan = report.get("plan", {})
     if plan:
-        duration = float(plan.get("duration_s", float("nan")))
+        duration = PlanSummary.of(plan).duration_s
         text = f"{duration:.0f} s of printing"
         if printing_s > 0 and time_scale > 0 and duration > 0:
             # the twin pauses the cell's clock when it cannot keep the pace asked for

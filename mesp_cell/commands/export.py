@@ -74,6 +74,7 @@ def _csv(job: Path, args: argparse.Namespace) -> str:
 
 def _urscript(job: Path, args: argparse.Namespace) -> str:
     from core.report import read_report
+    from planner.plan_summary import PlanSummary
     from planner.status import PlanStatus
     from planner.trajectory import Trajectory
     from sim.urscript import ExtruderIO, urscript
@@ -82,7 +83,7 @@ def _urscript(job: Path, args: argparse.Namespace) -> str:
     if not (job / "trajectory.npz").is_file():
         raise InputError(f"{job} has no trajectory.npz", f"run `mesp plan {job}` first")
     report = read_report(job)
-    status = report.get("plan", {}).get("status", PlanStatus.OK)
+    status = PlanSummary.of(report.get("plan", {})).status
     if status != PlanStatus.OK:
         raise InputError(f"the plan in {job} cannot be executed ({status})",
                          f"fix the plan (see plan in {job / 'report.json'}) and re-run mesp plan")

@@ -4,8 +4,8 @@
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -13,6 +13,7 @@ from core.errors import InputError
 from core.report import read_report
 from core.stages import Toolpath
 from mesp_cell.console import ConsoleProgress
+from sim.print_summary import PrintSummary
 from sim.voxel_choice import AUTO_VOXEL_BUDGET, DEFAULT_VOXEL_MM
 
 
@@ -142,27 +143,21 @@ def _check(args: argparse.Namespace) -> None:
             raise InputError(f"{name} {value} is out of range", f"use {lo} to {hi}")
 
 
-def _facing(summary: dict[str, Any], facing: str) -> float:
-    """Signed mean surface error on the model faces facing ``facing`` (nan if none)."""
-    part = summary.get("surface_error_by_facing", {}).get(facing)
-    return float(part["signed_mean"]) if part and part["share"] > 0 else float("nan")
-
-
-def _table(columns: list[tuple[str, dict[str, Any]]]) -> str:
+def _table(columns: list[tuple[str, PrintSummary]]) -> str:
     """Side-by-side table (one column per simulated print), with the paper's numbers."""
-    rows = [
-        ("infill ratio %", lambda s: 100 * s["infill_ratio"], "-"),
-        ("interior infill % (1 mm)", lambda s: 100 * s["interior_infill_ratio"], "99.47 (CT)"),
-        ("pore ratio %", lambda s: 100 * s["pore_ratio"], "0.25"),
-        ("over-deposition %", lambda s: 100 * s["over_deposition"], "-"),
-        ("under-deposition %", lambda s: 100 * s["under_deposition"], "-"),
-        ("surface error mean mm", lambda s: s["surface_error_mm"]["mean"], "0.20 (planar 0.49)"),
-        ("surface error p95 mm", lambda s: s["surface_error_mm"]["p95"], "-"),
-        ("surface error max mm", lambda s: s["surface_error_mm"]["max"], "< 1.5"),
+    rows: list[tuple[str, Callable[[PrintSummary], float], str]] = [
+        ("infill ratio %", lambda s: 100 * s.infill_ratio, "-"),
+        ("interior infill % (1 mm)", lambda s: 100 * s.interior_infill_ratio, "99.47 (CT)"),
+        ("pore ratio %", lambda s: 100 * s.pore_ratio, "0.25"),
+        ("over-deposition %", lambda s: 100 * s.over_deposition, "-"),
+        ("under-deposition %", lambda s: 100 * s.under_deposition, "-"),
+        ("surface error mean mm", lambda s: s.surface_error_mm["mean"], "0.20 (planar 0.49)"),
+        ("surface error p95 mm", lambda s: s.surface_error_mm["p95"], "-"),
+        ("surface error max mm", lambda s: s.surface_error_mm["max"], "< 1.5"),
         # signed: > 0 the print bulges out of faces facing that way, < 0 it falls short
-        ("  signed, up faces mm", lambda s: _facing(s, "up"), "-"),
-        ("  signed, side faces mm", lambda s: _facing(s, "side"), "-"),
-        ("  signed, down faces mm", lambda s: _facing(s, "down"), "-"),
+        ("  signed, up faces mm", lambda s: s.signed_error("up"), "-"),
+        ("  signed, side faces mm", lambda s: s.signed_error("side"), "-"),
+        ("  signed, down faces mm", lambda s: s.signed_error("down"), "-"),
     ]
     head = f"{'':24}" + "".join(f"{label:>16}" for label, _ in columns)
     lines = [head + f"   {'paper':<20}"]

@@ -192,7 +192,7 @@ def ready(args: argparse.Namespace) -> int:
     client = _client(args)
     try:
         job = client.status(args.job_id)
-        if job.state != "ready_check":
+        if job.state != JobState.READY_CHECK:
             raise InputError(f"job {job.id} is {job.state}, not waiting for the tank-ready "
                              "confirmation", "confirm a job `mesp job list` shows in ready_check")
         if not client.running:
@@ -212,9 +212,9 @@ def control(args: argparse.Namespace) -> int:
     try:
         job = client.status(args.job_id)
         if not client.running:
-            if args.verb == "abort" and job.state in ("submitted", "sliced", "planned",
-                                                      "ready_check", "paused", "interrupted"):
-                client.store.transition(job.id, "aborted", "aborted by the operator")
+            if args.verb == "abort" and not JobState(job.state).final \
+                    and job.state != JobState.PRINTING:
+                client.store.transition(job.id, JobState.ABORTED, "aborted by the operator")
                 print(f"{job.id} aborted")
                 return 0
             if args.verb == "resume":

@@ -64,6 +64,7 @@ def run(args: argparse.Namespace) -> int:
     from planner.cell import load_cell
     from planner.other_cells import checked_fix, try_cells
     from planner.plan import plan
+    from planner.plan_summary import PlanSummary
     from planner.status import PlanStatus, Refused
 
     if args.render or args.video:
@@ -115,13 +116,7 @@ def run(args: argparse.Namespace) -> int:
         report["video"] = _video(job_dir, cell, result, toolpath, args.speedup, size, progress)
     report["total_s"] = time.perf_counter() - start
     update_report(job_dir, {"plan": report})
-    summary = {
-        "status": str(report["status"]),
-        "duration_s": round(report["duration_s"], 2),
-        "min_clearance_mm": report["min_clearance_mm"],
-        "unreachable": report["unreachable"]["count"],
-        "over_deposition_mm3": round(report["over_deposition"]["volume_mm3"], 3),
-    }
+    summary = PlanSummary.of(report).to_dict()
     progress.info(f"done: {json.dumps(summary)}; trajectory in {job_dir / 'trajectory.npz'}")
     if result.status != PlanStatus.OK:
         # the trajectory is kept for inspection, but a cell would refuse it: say why and what

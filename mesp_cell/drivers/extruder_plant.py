@@ -18,6 +18,7 @@ import math
 import threading
 from dataclasses import dataclass
 
+from core.tolerance import tol
 from mesp_cell.drivers.sim_clock import SimClock, clock_for
 from mesp_cell.messages import FAULT_ESTOP, FAULT_STALL, FAULT_WATCHDOG
 
@@ -166,7 +167,7 @@ class ExtruderPlant:
         from mesp_cell.drivers import registers as R
 
         at_set = self.running and abs(self.rate - self.rate_set) <= R.AT_SET_BAND * max(
-            self.rate_set, 1e-9
+            self.rate_set, tol.floor
         )
         return (
             (R.ST_RUNNING if self.running else 0)

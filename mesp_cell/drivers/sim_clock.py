@@ -29,6 +29,8 @@ import os
 import time
 from pathlib import Path
 
+from core.tolerance import tol
+
 
 class _Shared(ctypes.Structure):
     """The file's layout: the sequence, then the two slots of ``paused`` (s)."""
@@ -121,6 +123,6 @@ def clock_for(scale: float, clock: SimClock | None = None) -> SimClock:
     or a private clock at ``scale``."""
     if clock is None:
         return SimClock(scale)
-    if abs(clock.scale - scale) > 1e-9 * scale:
+    if abs(clock.scale - scale) > tol.slack * scale:
         raise ValueError(f"clock scale {clock.scale} differs from time_scale {scale}")
     return clock

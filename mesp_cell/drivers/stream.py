@@ -23,6 +23,7 @@ import numpy as np
 
 from core.artifacts import load_npz
 from core.errors import InputError
+from core.tolerance import tol
 from mesp_cell.drivers.robot_base import UR5E_Q_LIMIT, UR5E_QD_LIMIT, RobotDriver
 
 MAX_PERIODS = 1 << 20  # servo periods a stream keeps for its jitter statistics (~35 min at 500 Hz)
@@ -144,7 +145,7 @@ class StreamPlan:
     @property
     def samples(self) -> int:
         """K: servo samples from the first trajectory sample to the last."""
-        return int(np.floor(self.t[-1] / self.dt + 1e-9)) + 1
+        return int(np.floor(self.t[-1] / self.dt + tol.slack)) + 1
 
     @property
     def q(self) -> ServoJoints:
@@ -190,7 +191,7 @@ class StreamPlan:
         if not len(knots):
             return self.samples
         # the first servo sample at or after each depositing trajectory sample
-        k = np.ceil(self.t[knots] / self.dt - 1e-9).astype(np.int64)
+        k = np.ceil(self.t[knots] / self.dt - tol.slack).astype(np.int64)
         k = k[k < self.samples]
         if not len(k):
             return self.samples
@@ -260,9 +261,9 @@ class StreamPlan:
                              "re-plan the job")
         # servo sample k is at t0 + k dt (interpolated when streamed, see the class)
         t = t - t[0]
-        K = int(np.floor(t[-1] / dt + 1e-9)) + 1
+        K = int(np.floor(t[-1] / dt + tol.slack)) + 1
         wp_id = wp[has]
-        wp_sample = np.minimum(np.ceil(t[has] / dt - 1e-9).astype(np.int64), K - 1)
+        wp_sample = np.minimum(np.ceil(t[has] / dt - tol.slack).astype(np.int64), K - 1)
         wp_layer = np.full(wp_id.shape, -1, dtype=np.int64)
         layers = 0
         flow = np.ones(M)

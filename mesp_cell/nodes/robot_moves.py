@@ -48,7 +48,7 @@ class RobotMoves:
     def _reach(self, job_dir: Path | None) -> Any:
         """The planner's reachability model of this cell, gel filled as the job's plan
         filled it (``fit_gel`` on the job's toolpath), or the cell's own fill."""
-        from planner.orientation import Reach
+        from planner.reach import Reach
         from planner.placement import fit_gel
 
         cell = self.cell

@@ -22,6 +22,7 @@ from fastapi.responses import FileResponse, JSONResponse, RedirectResponse, Resp
 from fastapi.staticfiles import StaticFiles
 
 from core.errors import InputError
+from core.status import JobState
 from mesp_cell.estop_check import confirm_estop
 from mesp_cell.jobs import FINAL, JobRecord
 from mesp_cell.messages import Command, EStop
@@ -124,7 +125,7 @@ def build_app(ctx: ConsoleContext) -> FastAPI:
 
     @app.post("/api/estop", dependencies=act, summary="software e-stop: robot and extruder")
     def estop(reason: Annotated[str, Form(max_length=200)] = "console") -> dict[str, Any]:
-        printing = tuple(j.id for j in ctx.store.query(ctx.cell, ("printing",)))
+        printing = tuple(j.id for j in ctx.store.query(ctx.cell, (JobState.PRINTING,)))
         sent = time.time()
         ctx.bus.publish_to("estop", "estop", EStop("console", reason, sent))
         done = confirm_estop(ctx.bus, ctx.store, ctx.cell, sent, printing)

@@ -63,7 +63,7 @@ def job_json(job: JobRecord, history: list[tuple[float, str, str, str]] | None =
         "ink_mm3": job.volume, "resume_pending": bool(job.resume),
         "ready_confirmed": bool(job.ready), "final": job.state in FINAL}
     if history is not None:
-        starts = [t for t, _, new, _ in history if new == "printing"]
+        starts = [t for t, _, new, _ in history if new == JobState.PRINTING]
         out["started"] = starts[0] if starts else None
         out["duration_s"] = (job.updated - starts[0]) if starts and job.state in FINAL else None
         out["result"] = job.state if job.state in FINAL else None

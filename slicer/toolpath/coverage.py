@@ -24,6 +24,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from core.stages import Layers, Toolpath
+from core.tolerance import tol
 from slicer.toolpath.linking import deposit_mask
 
 SAMPLES_PER_W2 = 6.0  # sample density relative to the layer's median width squared
@@ -69,7 +70,8 @@ class LayerCoverage(NamedTuple):
             }
         bare = (self.pattern < 0) & (self.area > 0)
         out["unprinted_layers"] = int(bare.sum())
-        out["unprinted_area_fraction"] = float(self.area[bare].sum() / max(self.area.sum(), 1e-300))
+        out["unprinted_area_fraction"] = float(self.area[bare].sum()
+                                               / max(self.area.sum(), tol.tiny))
         out["per_layer"] = {"gap": np.round(self.gap, 4).tolist(),
                             "overlap": np.round(self.overlap, 4).tolist()}
         return out
@@ -87,7 +89,7 @@ def _sample_layer(vertices: NDArray[np.float64], faces: NDArray[np.int64], count
     u[flip], v[flip] = 1.0 - u[flip], 1.0 - v[flip]
     t = tri[pick]
     points = t[:, 0] + u[:, None] * (t[:, 1] - t[:, 0]) + v[:, None] * (t[:, 2] - t[:, 0])
-    normal = cross[pick] / np.maximum(area2[pick], 1e-300)[:, None]
+    normal = cross[pick] / np.maximum(area2[pick], tol.tiny)[:, None]
     return points, normal
 
 
@@ -139,7 +141,7 @@ def _covered_pairs(points: NDArray[np.float64], normal: NDArray[np.float64],
     j = pairs["j"].astype(np.int64)
     ab = seg.b[j] - seg.a[j]
     t = np.einsum("ij,ij->i", points[i] - seg.a[j], ab) / np.maximum(
-        np.einsum("ij,ij->i", ab, ab), 1e-300)
+        np.einsum("ij,ij->i", ab, ab), tol.tiny)
     closest = seg.a[j] + np.clip(t, 0.0, 1.0)[:, None] * ab
     d = points[i] - closest
     along = np.einsum("ij,ij->i", d, normal[i])
@@ -199,7 +201,7 @@ def layer_coverage(layers: Layers, tp: Toolpath, samples_per_w2: float = SAMPLES
             continue
         pattern[k] = int(np.bincount(np.asarray(tp.pattern)[rows].astype(np.int64)).argmax())
         w_med = 2.0 * float(np.median(seg.half_width))
-        count = int(np.clip(samples_per_w2 * area[k] / max(w_med, 1e-9) ** 2,
+        count = int(np.clip(samples_per_w2 * area[k] / max(w_med, tol.floor) ** 2,
                             MIN_SAMPLES, max(max_samples, MIN_SAMPLES)))
         points, normal = _sample_layer(vertices, f, count, rng)
         i, j = _covered_pairs(points, normal, seg)

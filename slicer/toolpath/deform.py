@@ -20,16 +20,16 @@ tolerance.
 
 from __future__ import annotations
 
-from typing import Literal, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
 from core.errors import InputError
+from core.tolerance import tol
+from slicer.status import DeformStatus
 from slicer.toolpath.surface import check_mesh, components, face_normals, spd_solver
-
-Status = Literal["converged", "within_tolerance", "max_iterations"]
 
 
 class DeformResult(NamedTuple):
@@ -38,9 +38,9 @@ class DeformResult(NamedTuple):
     vertices: (n, 3) float64 mm, deformed layer (same connectivity as the input).
     scale:    (m,) float64, target per-face scale s_f (eq. 14).
     achieved: (m,) float64, achieved per-face scale sqrt(area_deformed / area).
-    status:   "within_tolerance" (achieved scale within ``scale_tol`` of the target on 90 % of
-              the area), "converged" (relative energy change below ``rtol``) or
-              "max_iterations".
+    status:   ``DeformStatus``: WITHIN_TOLERANCE (achieved scale within ``scale_tol`` of the
+              target on 90 % of the area), CONVERGED (relative energy change below ``rtol``)
+              or MAX_ITERATIONS.
     trace:    (k,) float64 mm^2, energy of eq. 13 after each iteration.
     deviation: float, area-weighted p90 of |achieved / scale - 1| at the result.
     """
@@ -48,7 +48,7 @@ class DeformResult(NamedTuple):
     vertices: NDArray[np.float64]
     scale: NDArray[np.float64]
     achieved: NDArray[np.float64]
-    status: Status
+    status: DeformStatus
     trace: NDArray[np.float64]
     deviation: float
 
@@ -62,7 +62,7 @@ def scale_deviation(vertices: NDArray[np.float64], faces: NDArray[np.int64],
     areas before deformation; scale: (m,) target per-face scale s_f.
     """
     _, area_d = face_normals(vertices, faces)
-    achieved = np.sqrt(area_d / np.maximum(area, 1e-300))
+    achieved = np.sqrt(area_d / np.maximum(area, tol.tiny))
     dev = np.abs(achieved / scale - 1.0)
     order = np.argsort(dev)
     cum = np.cumsum(area[order])
@@ -75,7 +75,7 @@ def face_scale(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     """(m,) s_f = 3 W_mean / sum_i W(x_i) (eq. 14); W_mean is the area-weighted mean width."""
     _, area = face_normals(vertices, faces)
     w_face = width[faces].mean(axis=1)
-    w_mean = float((w_face * area).sum() / max(area.sum(), 1e-300))
+    w_mean = float((w_face * area).sum() / max(area.sum(), tol.tiny))
     return w_mean / w_face
 
 
@@ -100,9 +100,9 @@ def _rotations(src: NDArray[np.float64], dst: NDArray[np.float64]) -> NDArray[np
 def _frames(centred: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Orthonormal in-plane frames (e1, e2), each (m, 3), of centred triangles (m, 3, 3)."""
     e1 = centred[:, 1] - centred[:, 0]
-    e1 /= np.maximum(np.linalg.norm(e1, axis=1), 1e-300)[:, None]
+    e1 /= np.maximum(np.linalg.norm(e1, axis=1), tol.tiny)[:, None]
     n = np.cross(centred[:, 1] - centred[:, 0], centred[:, 2] - centred[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+    n /= np.maximum(np.linalg.norm(n, axis=1), tol.tiny)[:, None]
     return e1, np.cross(n, e1)
 
 
@@ -157,7 +157,7 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
     used = np.unique(f)
     scale = face_scale(v, f, w)
     _, area = face_normals(v, f)
-    wt = np.sqrt(area / max(area.mean(), 1e-300))
+    wt = np.sqrt(area / max(area.mean(), tol.tiny))
     # A: (3m, n) rows x_k - mean(x_f) weighted by sqrt(area); K = A^T A depends on topology only
     rows = np.repeat(np.arange(3 * m), 3)
     cols = np.repeat(f, 3, axis=0).reshape(-1)
@@ -195,7 +195,7 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
     x = v.copy()
     target, energy = local(x)
     trace: list[float] = []
-    status: Status = "max_iterations"
+    status = DeformStatus.MAX_ITERATIONS
     # energy that counts as zero: relative to the size of the layer in the same units
     floor = 1e-20 * float((area[:, None, None] * centred**2).sum())
     # Anderson acceleration of the local-global fixed point x -> G(x) (plain local-global
@@ -209,10 +209,10 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
     deviation = scale_deviation(x, f, area, scale)[0] if scale_tol > 0 else np.inf
     for _ in range(iterations):
         if energy <= floor:
-            status = "converged"
+            status = DeformStatus.CONVERGED
             break
         if deviation <= scale_tol:
-            status = "within_tolerance"
+            status = DeformStatus.WITHIN_TOLERANCE
             break
         g = global_step(target, x)
         res = (g - x)[free].ravel()
@@ -239,10 +239,10 @@ def deform_to_constant_width(vertices: NDArray[np.float64], faces: NDArray[np.in
         if scale_tol > 0:
             deviation = scale_deviation(x, f, area, scale)[0]
         if deviation <= scale_tol:
-            status = "within_tolerance"
+            status = DeformStatus.WITHIN_TOLERANCE
             break
-        if energy <= floor or abs(previous - energy) <= rtol * max(previous, 1e-300):
-            status = "converged"
+        if energy <= floor or abs(previous - energy) <= rtol * max(previous, tol.tiny):
+            status = DeformStatus.CONVERGED
             break
     for comp in components(f):  # each piece moves back to its own centroid
         ids = np.unique(f[comp])

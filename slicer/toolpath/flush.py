@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 
 from core.alpha_range import AlphaRange
 from core.stages import TetMesh, Toolpath
+from core.tolerance import tol
 
 # Smallest cosine between the printing direction and the surface normal used to convert a
 # distance to the surface into a move along the printing direction (steeper: capped anyway).
@@ -258,7 +259,7 @@ def flush_toolpath(toolpath: Toolpath, tetmesh: TetMesh, model: FilamentModel,
         mean_mm=float(size.mean()) if size.size else 0.0,
         p95_mm=float(np.percentile(size, 95)) if size.size else 0.0,
         max_mm=float(size.max()) if size.size else 0.0,
-        capped=int((moved & (np.abs(net) >= cap - 1e-9)).sum()),
+        capped=int((moved & (np.abs(net) >= cap - tol.slack)).sum()),
         residual_mm=float(residual.max()) if residual.size else 0.0,
     )
     fields = toolpath.arrays()

@@ -22,7 +22,8 @@ from slicer.toolpath.perimeter import (
     clip_lines,
     perimeter_loop,
 )
-from slicer.toolpath.stripes import poisson_stripe_lines, stripe_lines
+from slicer.toolpath.poisson_stripes import poisson_stripe_lines
+from slicer.toolpath.stripes import stripe_lines
 from slicer.toolpath.surface_geometry import (
     CENTRE_WIDTH_SCALE,
     Backend,

@@ -169,7 +169,7 @@ class Lifter:
             _, nearest = self.tree.query(p)
             nrm = self.normals[nearest]
             h = np.einsum("ij,ij->i", p - self.vertices[nearest], nrm)
-            short = h < lift * (1.0 - 1e-9)
+            short = h < lift * (1.0 - tol.slack)
             if not np.any(short):
                 break
             p[short] += (lift - h[short])[:, None] * nrm[short]

@@ -414,7 +414,7 @@ def order_lines(
     else:
         # contour k sits at (k + 1/2) * step: floor keeps rings apart (round would merge
         # 1.5 and 2.5 by rounding half to even)
-        ring = np.floor(np.asarray(level) / max(level_step, 1e-9)).astype(np.int64)
+        ring = np.floor(np.asarray(level) / max(level_step, tol.floor)).astype(np.int64)
     pos = np.asarray(start_pos, dtype=np.float64)
     splices: dict[int, Splice] = {}
     if level is not None and can_join is not None:

@@ -22,6 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.stages import Toolpath
+from core.tolerance import tol
 
 PRINTPOINT_FIELDS = (
     "point", "layer_height", "mesh_normal", "up_vector", "frame", "extruder_toggle",
@@ -35,7 +36,7 @@ CSV_COLUMNS = ("index", "layer", "path", "x_mm", "y_mm", "z_mm", "nx", "ny", "nz
 def _unit(v: NDArray[np.float64], fallback: NDArray[np.float64]) -> NDArray[np.float64]:
     """Rows of ``v`` (K, 3) normalised; rows shorter than 1e-12 replaced by ``fallback``."""
     n = np.linalg.norm(v, axis=1, keepdims=True)
-    return np.where(n > 1e-12, v / np.maximum(n, 1e-300), fallback)
+    return np.where(n > tol.zero, v / np.maximum(n, tol.zero), fallback)
 
 
 def tangents(toolpath: Toolpath) -> NDArray[np.float64]:

@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from core.stages import Toolpath
 from slicer.extrusion import ExtrusionProfile
+from slicer.status import ComponentFallback, ToolpathStatus, VolumeStatus
 from slicer.toolpath.linking import deposit_mask
 from slicer.toolpath.results import PATTERN_NAMES, LayerResult
 from slicer.toolpath.volume import segment_volume
@@ -33,11 +34,11 @@ def _pct_range(values: NDArray[np.float64]) -> dict[str, float]:
 
 
 def toolpath_report(results: list[LayerResult], tp: Toolpath, profile: ExtrusionProfile
-                    ) -> tuple[dict[str, Any], dict[str, dict[str, NDArray[np.float64]]], str,
-                               dict[str, float]]:
+                    ) -> tuple[dict[str, Any], dict[str, dict[str, NDArray[np.float64]]],
+                               ToolpathStatus, dict[str, float]]:
     """The report section of ``results`` assembled into ``tp``, the width errors per pattern
-    and kind, the status ('ok', 'volume' when a component missed the volume tolerance,
-    'failed-components' when one was skipped) and the summed per-component timings."""
+    and kind, the status (``ToolpathStatus``: OK, VOLUME when a component missed the volume
+    tolerance, FAILED_COMPONENTS when one was skipped) and the summed per-component timings."""
     comps = [c for r in results for c in r.components]
     errors: dict[str, dict[str, NDArray[np.float64]]] = {}
     for code, name in PATTERN_NAMES.items():
@@ -119,11 +120,11 @@ def toolpath_report(results: list[LayerResult], tp: Toolpath, profile: Extrusion
         },
         "volume_match_status": statuses,
         "thin_fallback": {kind: sum(c.fallback == kind for c in comps)
-                          for kind in ("contour", "centre-line")},
+                          for kind in (ComponentFallback.CONTOUR, ComponentFallback.CENTRE_LINE)},
         # contour components that are no band (fitted lines left holes, eq. 9 lines fill them)
-        "band_fit_holes_filled": sum(c.fallback == "holes-filled" for c in comps),
+        "band_fit_holes_filled": sum(c.fallback == ComponentFallback.HOLES_FILLED for c in comps),
         # no band, and eq. 9's contours alone kept their spacing better than the fitted ones
-        "band_fit_dropped": sum(c.fallback == "no-band" for c in comps),
+        "band_fit_dropped": sum(c.fallback == ComponentFallback.NO_BAND for c in comps),
         "deformation_status": deform,
         "height_out_of_profile_fraction": out_of_range / n_vert if n_vert else 0.0,
         "profile": {"name": profile.name, "sha256": profile.sha256,
@@ -139,7 +140,8 @@ def toolpath_report(results: list[LayerResult], tp: Toolpath, profile: Extrusion
     }
     failed = [f"layer {r.index}: {c.error}" for r in results for c in r.components if c.error]
     report["failed_components"] = {"count": len(failed), "reasons": failed[:20]}
-    status = "ok" if set(statuses) <= {"converged", "converged-scan"} else "volume"
+    matched = set(statuses) <= {VolumeStatus.CONVERGED, VolumeStatus.CONVERGED_SCAN}
+    status = ToolpathStatus.OK if matched else ToolpathStatus.VOLUME
     if failed:
-        status = "failed-components"
+        status = ToolpathStatus.FAILED_COMPONENTS
     return report, errors, status, timings

@@ -158,7 +158,7 @@ def resample_lines(
     first, last, ids, total, is_closed, t_start = (
         first[keep], last[keep], ids[keep], total[keep], is_closed[keep], t_start[keep]
     )
-    n_int = np.maximum(np.ceil(total - 1e-9).astype(np.int64), 1)
+    n_int = np.maximum(np.ceil(total - tol.slack).astype(np.int64), 1)
     n_int = np.where(is_closed, np.maximum(n_int, 3), np.maximum(n_int, min_points - 1))
     n_samples = np.where(is_closed, n_int, n_int + 1)
     out_line = np.repeat(np.arange(len(ids)), n_samples)

@@ -10,6 +10,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from core.stages import Pattern, Toolpath
+from slicer.status import ToolpathStatus
 from slicer.toolpath.linking import deposit_mask
 from slicer.toolpath.volume import segment_volume
 
@@ -159,8 +160,8 @@ class ToolpathResult:
         report: the design.md "toolpath" report section (+ extra keys).
         layer_stats: per-layer dicts (layer, pattern, components, volumes, tau, starts).
         width_errors: {"contour"|"stripe": {"deformed"|"undeformed"|"poisson": (k,) f8}}.
-        status: 'ok'; 'volume' when some component missed the volume tolerance;
-            'failed-components' when some component was skipped (reasons in the report).
+        status: ``ToolpathStatus``: OK; VOLUME when some component missed the volume
+            tolerance; FAILED_COMPONENTS when some component was skipped (reasons in the report).
         timings: stage -> s (summed over layers for per-layer stages).
     """
 
@@ -168,7 +169,7 @@ class ToolpathResult:
     report: dict[str, Any]
     layer_stats: list[dict[str, Any]]
     width_errors: dict[str, dict[str, NDArray[np.float64]]]
-    status: str
+    status: ToolpathStatus
     timings: dict[str, float]
 
 

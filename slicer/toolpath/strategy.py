@@ -25,6 +25,7 @@ from core.stages import LayerMesh, Pattern
 from core.tolerance import tol
 from slicer.config import ToolpathConfig
 from slicer.extrusion import ExtrusionProfile
+from slicer.status import FLOW_FITTED, DeformStatus, VolumeStatus
 from slicer.toolpath.component import Built, Component
 from slicer.toolpath.deform import deform_to_constant_width
 from slicer.toolpath.line_source import LineSource
@@ -62,7 +63,7 @@ def component_toolpath(
         return ComponentResult(
             waypoints=Waypoints.concat([]), pattern=pattern, n_faces=len(faces),
             required_mm3=required, deposited_mm3=0.0, tau=float("nan"),
-            volume_status="failed", volume_trace=(), deform_status="failed",
+            volume_status=VolumeStatus.FAILED, volume_trace=(), deform_status=DeformStatus.FAILED,
             extrusion_starts=0, connector_mm3=0.0, width_error=np.zeros(0),
             width_error_undeformed=np.zeros(0),
             width_error_poisson=np.zeros(0), error=f"{type(exc).__name__}: {exc}",
@@ -79,7 +80,7 @@ def _component_toolpath_unsafe(
     t0 = time.perf_counter()
     comp = Component(layer, face_ids, pattern, cfg, profile)
     spread = float((comp.width.max() - comp.width.min()) / max(comp.w_mean, tol.zero))
-    deform_status = "skipped"
+    deform_status: str = DeformStatus.SKIPPED
     deformed = comp.vertices
     if spread > DEFORM_SPREAD and cfg.deformation_iterations > 0:
         res = deform_to_constant_width(comp.vertices, comp.faces, comp.width,
@@ -250,7 +251,7 @@ def _component_toolpath_unsafe(
         fitted = fit_flow(match.result)
         volume = float(fitted.waypoints.deposited().sum())
         match = replace(match, volume=volume, rel_error=volume / required - 1.0,
-                        status=f"{match.status}+flow", result=fitted)
+                        status=f"{match.status}{FLOW_FITTED}", result=fitted)
     timings["lines"] = time.perf_counter() - t0
     built = match.result
 

@@ -1,45 +1,21 @@
-"""Stripe toolpaths across the contours (paper eqs. 10-12) and the Poisson alternative.
+"""Stripe toolpaths across the contours (paper eqs. 10-12), after Knoppel et al. 2015.
 
-``stripe_lines`` follows Knoppel et al. 2015, "Stripe Patterns on Surfaces": a unit complex
-value Psi_i = exp(i psi_i) per vertex minimises sum_ij w_ij |Psi_j - T_ij(Psi_i)|^2 (eq. 11)
-with T_ij the rotation by the target phase change omega_ij along edge ij; for a line field
-(direction defined up to sign) an edge whose end directions disagree also conjugates
-(Psi_j = conj(exp(i omega_ij) Psi_i)). In real form (Psi = a + ib) this is a 2n x 2n symmetric
-matrix A; the solution is the eigenvector of the smallest eigenvalue of A x = lambda M x with
-the lumped mass M (ARPACK shift-invert, or, default and ~4x faster at equal quality, inverse
-iteration on the same factor). The relaxed eigenvector puts nearly all its amplitude near the
-boundary; projected inverse iterations (unit modulus per vertex) then spread it, which is what
-places the branch points (p90 width error on a radial disc 36% -> 29%). Lines are the crests
-psi = 2 pi N (eq. 12), extracted face by face from the phases unwrapped with the per-edge
-jumps. Faces around which the jumps add up to a whole period hold a branch point: there the
-stripe running past is joined straight through (the two stripe ends farthest apart) and the
-stripe that stops simply ends; faces where the line field itself is singular emit nothing.
-
-Where the stripe count must fall (disc-like layers: radial stripes towards the centre), the
-field alone lets the stripes that end converge on their neighbours for a few widths before the
-branch point: spacing 0.5-0.8 W over much of a small disc, overlapping material, and the volume
-match then widens every stripe of the layer (tau 1.12-1.19 on the hemisphere). ``trim_converging``
-cuts such ends back to CONVERGE_TRIM x spacing from the longer neighbour (a gap of at most
-2 x 0.7 = 1.4 W stays, against an overlap of up to 1 W). Measured on the stripe layers (odd
-layers, default config) of the sliced examples, p50 / p90 width error before -> after:
-hemisphere 19.0 / 56.9 % -> 7.9 / 24.2 % (tau median 1.14 -> 1.03), membrane 11.7 / 60.5 % ->
-6.3 / 34.4 %, cube 14.8 / 67.0 % -> 7.5 / 50.4 % (its 20 mm layers are 8 W wide: the rest is
-the boundary loop of stripe_perimeter, whose nearest line is the stripe ends 1-1.8 W away;
-without the loop 26.1 / 52.6 % -> 8.8 / 17.8 %), socket layers 1-60 6.5 / 20.1 % ->
-4.5 / 13.1 %, socket annular layers 61-271 4.8 / 13.7 % -> 3.5 / 9.7 %; CPU time of those
-socket layers +2.4 % (more volume-match trials, 95 -> 108). Virtual print of the hemisphere
-(mesp slice + inspect, two runs; the slicing differs a little from run to run): infill
-98.08 / 98.19 -> 98.19 / 98.26 %, pores 0.10 / 0.06 -> 0.17 / 0.07 % (the trimmed ends leave
-small gaps), surface error mean 0.161 / 0.156 -> 0.153 / 0.150 mm, but its max 0.81 / 0.83 ->
-3.25 / 2.50 mm (not yet located).
-Tried and dropped: placing the branch points explicitly (greedy charges minimising the
-Dirichlet energy of the corrected target form, then eq. 11 on that form): the L2-optimal
-placement puts about 25 % fewer branch points than the line count needs (a point defect
-costs log-divergent energy), so the rim came out 1.2 W sparse; forcing more charges clustered
-them (p90 42 -> 43-58 % on a 16 mm disc at W 2.5). A finer mesh does not help either (same
-disc, edge 1.6 / 0.8 / 0.4 mm: p90 33 / 42 / 53 %): the eigenvector then resolves the
-converging ends even better. (Knoppel's own count of stripes crossing each circle matches
-2 pi r / W within 1-2 there; the error is in where the stripes run, not how many there are.)
+``stripe_lines`` follows "Stripe Patterns on Surfaces": a unit complex value Psi_i = exp(i psi_i)
+per vertex minimises sum_ij w_ij |Psi_j - T_ij(Psi_i)|^2 (eq. 11) with T_ij the rotation by the
+target phase change omega_ij along edge ij; for a line field (direction defined up to sign) an
+edge whose end directions disagree also conjugates (Psi_j = conj(exp(i omega_ij) Psi_i)). In
+real form (Psi = a + ib) this is a 2n x 2n symmetric matrix A; the solution is the eigenvector
+of the smallest eigenvalue of A x = lambda M x with the lumped mass M (inverse iteration on one
+factor by default, ARPACK shift-invert as the alternative). The relaxed eigenvector puts nearly
+all its amplitude near the boundary; projected inverse iterations (unit modulus per vertex) then
+spread it, which is what places the branch points. Lines are the crests psi = 2 pi N (eq. 12),
+extracted face by face from the phases unwrapped with the per-edge jumps. Faces around which
+the jumps add up to a whole period hold a branch point: there the stripe running past is joined
+straight through (the two stripe ends farthest apart) and the stripe that stops simply ends;
+faces where the line field itself is singular emit nothing. Stripe ends that converge on a
+longer neighbour are cut back (``stripe_trim``); the Poisson alternative of the paper's
+comparison is ``poisson_stripes``. Measurements behind these choices: docs/benchmarks.md
+("Moved from docstrings", stripes).
 """
 
 from __future__ import annotations
@@ -57,18 +33,16 @@ from core.tolerance import tol
 from slicer.toolpath.isolines import (
     Nodes,
     edge_crossings,
-    iso_lines,
     lines_from_segments,
     periodic_face_segments,
 )
 from slicer.toolpath.lines import SurfaceLines, empty_lines, merge_lines
+from slicer.toolpath.stripe_trim import CONVERGE_TRIM, trim_converging
 from slicer.toolpath.surface import (
     check_mesh,
     components,
-    cotan_laplacian,
     cotan_weights,
     edge_topology,
-    face_gradient,
     face_normals,
     lumped_mass,
     rotate_in_plane,
@@ -76,6 +50,9 @@ from slicer.toolpath.surface import (
     tangent_frames,
     vertex_normals,
 )
+
+EIGEN_SHIFT = 1e-6  # sigma of the shift-invert, relative to the mean diagonal of A over M
+ARPACK_RTOL = 1e-6  # relative accuracy of ARPACK's eigenpair (the ``arpack`` alternative)
 
 
 class StripeField(NamedTuple):
@@ -93,8 +70,9 @@ class StripeField(NamedTuple):
     eigenvalue: float
 
 
-def _check(vertices: NDArray[np.float64], faces: NDArray[np.integer],
-           direction: NDArray[np.float64], spacing: float) -> None:
+def check_stripe_inputs(vertices: NDArray[np.float64], faces: NDArray[np.integer],
+                        direction: NDArray[np.float64], spacing: float) -> None:
+    """Raise ``InputError`` unless the mesh, the per-face direction and the spacing are usable."""
     check_mesh(vertices, faces)
     d = np.asarray(direction)
     if d.shape != (len(faces), 3) or not np.all(np.isfinite(d)):
@@ -139,7 +117,7 @@ def stripe_field(vertices: NDArray[np.float64], faces: NDArray[np.integer],
                  direction: NDArray[np.float64], spacing: float, refine: int = 10,
                  eigen: Literal["arpack", "inverse"] = "inverse") -> StripeField:
     """Solve eq. 11: the periodic field whose crests run along ``direction``, ``spacing`` apart."""
-    _check(vertices, faces, direction, spacing)
+    check_stripe_inputs(vertices, faces, direction, spacing)
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     n = len(v)
@@ -173,14 +151,14 @@ def stripe_field(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     mass = np.repeat(np.maximum(lumped_mass(v, f), tol.zero), 2)
     mmat = sp.diags(mass).tocsc()
     # shift-invert just below zero: A is PSD, so A - sigma M is definite and splu-stable
-    sigma = -1e-6 * float(amat.diagonal().mean() / mass.mean())
+    sigma = -EIGEN_SHIFT * float(amat.diagonal().mean() / mass.mean())
     # one factorisation serves the shift-invert eigen solve and the refinement below
     solve = spd_solver(amat - sigma * mmat)
     opinv = LinearOperator((2 * n, 2 * n), matvec=solve, dtype=np.float64)
     rng = np.random.default_rng(0)
     if eigen == "arpack":
         vals_, vecs = eigsh(amat, k=1, M=mmat, sigma=sigma, which="LM", OPinv=opinv,
-                            v0=rng.standard_normal(2 * n), tol=1e-6, ncv=8)
+                            v0=rng.standard_normal(2 * n), tol=ARPACK_RTOL, ncv=8)
         x = vecs[:, 0].reshape(n, 2)
         lam = float(vals_[0])
     else:
@@ -300,8 +278,8 @@ LineFn = Callable[[NDArray[np.float64], NDArray[np.int64], NDArray[np.float64], 
                   SurfaceLines]
 
 
-def _per_component(fn: LineFn, vertices: NDArray[np.float64], faces: NDArray[np.integer],
-                   direction: NDArray[np.float64], spacing: float) -> SurfaceLines:
+def per_component(fn: LineFn, vertices: NDArray[np.float64], faces: NDArray[np.integer],
+                  direction: NDArray[np.float64], spacing: float) -> SurfaceLines:
     """Run a pattern on each edge-connected component (its eigen/Poisson problem is per piece)."""
     comps = components(faces)
     f = np.asarray(faces, dtype=np.int64)
@@ -357,147 +335,5 @@ def stripe_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     (tau * W). Lines are cut at the boundary; at a branch point one line ends and its
     neighbour runs through. Several components are solved one by one.
     """
-    _check(vertices, faces, direction, spacing)
-    return _per_component(_stripe_lines_one, vertices, faces, direction, spacing)
-
-
-def poisson_potential(vertices: NDArray[np.float64], faces: NDArray[np.integer],
-                      direction: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(n,) phi minimising sum_f area |grad phi - z_f|^2 (L phi = div z), z = direction^perp.
-
-    Neumann boundary; the constant is fixed by a zero mean. phi is then scaled so that its
-    area-weighted mean gradient norm is 1 (so phi is a length in mm where |grad phi| = 1).
-    """
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    n = len(v)
-    fn, area = face_normals(v, f)
-    zf = rotate_in_plane(np.asarray(direction, dtype=np.float64), fn)
-    p = v[f]
-    rhs = np.zeros(n)
-    for k in range(3):
-        opp = p[:, (k + 2) % 3] - p[:, (k + 1) % 3]
-        grad_b = np.cross(fn, opp) / np.maximum(2.0 * area, tol.zero)[:, None]
-        np.add.at(rhs, f[:, k], area * np.einsum("ij,ij->i", zf, grad_b))
-    lap = cotan_laplacian(v, f)
-    used = np.unique(f)
-    pin = int(used[0])
-    free = np.setdiff1d(used, [pin])
-    # the Neumann problem is solvable (rhs sums to zero); pinning one vertex fixes the constant
-    solve = spd_solver(lap[free][:, free])
-    phi = np.zeros(n)
-    phi[free] = solve(rhs[free])
-    g = np.linalg.norm(face_gradient(v, f, phi), axis=1)
-    mean_g = float((g * area).sum() / max(area.sum(), tol.zero))
-    phi = phi - phi[used].mean()
-    return phi / max(mean_g, tol.zero)
-
-
-def poisson_stripe_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer],
-                         direction: NDArray[np.float64], spacing: float) -> SurfaceLines:
-    """The real-valued alternative of the paper's comparison: lines phi = k * spacing."""
-    _check(vertices, faces, direction, spacing)
-    return _per_component(_poisson_lines_one, vertices, faces, direction, spacing)
-
-
-def _poisson_lines_one(vertices: NDArray[np.float64], faces: NDArray[np.int64],
-                       direction: NDArray[np.float64], spacing: float) -> SurfaceLines:
-    phi = poisson_potential(vertices, faces, direction)
-    used = np.unique(faces)
-    lo, hi = float(phi[used].min()), float(phi[used].max())
-    k = np.arange(np.floor(lo / spacing), np.ceil(hi / spacing) + 1)
-    levels = k * spacing
-    levels = levels[(levels > lo) & (levels < hi)]
-    if len(levels) == 0:
-        return empty_lines()
-    return iso_lines(vertices, faces, phi, levels)
-
-
-CONVERGE_TRIM = 0.7  # open stripe ends closer than this x spacing to a longer stripe are cut
-TRIM_REACH = 8.0  # ... within this x spacing (arc length) of the end
-
-
-def _point_segment_distance(p: NDArray[np.float64], a: NDArray[np.float64],
-                            b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(..., ) distance from points p to segments a-b (all (..., 3), broadcast)."""
-    ab = b - a
-    t = np.einsum("...j,...j->...", p - a, ab) / np.maximum(
-        np.einsum("...j,...j->...", ab, ab), tol.zero)
-    q = a + np.clip(t, 0.0, 1.0)[..., None] * ab
-    return np.asarray(np.linalg.norm(p - q, axis=-1))
-
-
-def trim_converging(lines: SurfaceLines, spacing: float, ratio: float = CONVERGE_TRIM,
-                    rounds: int = 1, reach: float = TRIM_REACH) -> SurfaceLines:
-    """Cut open stripes back from their ends where they run into a longer stripe.
-
-    Where the stripe count must fall (towards the centre of a radial pattern, at a branch
-    point), the stripe that ends converges on its neighbours for a few widths before it
-    stops: there the spacing drops to W/2 and less, the material overlaps, and the volume
-    match widens every other stripe of the layer to pay for it. Lines are ranked by length
-    (longest first); an open line's end points whose distance to the nearest segment of a
-    longer line is below ``ratio`` x ``spacing`` are dropped, from each end up to the first
-    point that keeps its distance (the line stays one piece; a line with no such point is
-    dropped). Only points within ``reach`` x spacing (arc length) of an open end are tested:
-    a converging end is a few widths long, and the rest of a long stripe costs time for
-    nothing. ``rounds`` passes, each against the lines the previous one kept (a second pass
-    changed 13 of 131,600 points on the socket: one is the default).
-    """
-    from scipy.spatial import cKDTree
-
-    out = lines
-    for _ in range(rounds):  # loop over passes
-        if out.n_lines < 2:
-            return out
-        ln = out.line.astype(np.int64)
-        p = out.points
-        seg_ok = ln[1:] == ln[:-1]
-        seg = np.flatnonzero(seg_ok)
-        if len(seg) == 0:
-            return out
-        length = np.bincount(ln[seg], weights=np.linalg.norm(p[seg + 1] - p[seg], axis=1),
-                             minlength=out.n_lines)
-        rank = np.empty(out.n_lines, dtype=np.int64)
-        rank[np.argsort(-length, kind="stable")] = np.arange(out.n_lines)
-        a, b = p[seg], p[seg + 1]
-        step = np.zeros(len(p))
-        step[seg + 1] = np.linalg.norm(b - a, axis=1)
-        arc = np.cumsum(step)
-        head = np.flatnonzero(np.concatenate([[True], ln[1:] != ln[:-1]]))
-        size = np.diff(np.concatenate([head, [len(p)]]))
-        tail = head + size - 1
-        from_end = np.minimum(arc - np.repeat(arc[head], size), np.repeat(arc[tail], size) - arc)
-        test = np.flatnonzero((from_end <= reach * spacing) & ~out.closed[ln])
-        if len(test) == 0:
-            return out
-        # (point, segment) pairs whose midpoints lie within ratio x spacing + half a segment; a
-        # segment longer than the 95th percentile may be missed near its ends (less trimming)
-        half = 0.5 * float(np.percentile(np.linalg.norm(b - a, axis=1), 95))
-        pairs = cKDTree(p[test]).sparse_distance_matrix(cKDTree(0.5 * (a + b)),
-                                                  ratio * spacing + half,
-                                                  output_type="ndarray")
-        pi, si = test[pairs["i"]], pairs["j"]
-        longer = rank[ln[seg[si]]] < rank[ln[pi]]
-        pi, si = pi[longer], si[longer]
-        close = _point_segment_distance(p[pi], a[si], b[si]) < ratio * spacing
-        bad = np.zeros(len(p), dtype=bool)
-        bad[pi[close]] = True
-        if not bad.any():
-            return out
-        # per line: keep from the first good point to the last good point
-        pos = np.arange(len(p)) - np.repeat(head, size)
-        good = ~bad
-        big = np.iinfo(np.int64).max
-        first = np.full(out.n_lines, big)
-        last = np.full(out.n_lines, -1)
-        np.minimum.at(first, ln[good], pos[good])
-        np.maximum.at(last, ln[good], pos[good])
-        keep = (pos >= first[ln]) & (pos <= last[ln])
-        counts = np.bincount(ln[keep], minlength=out.n_lines)
-        keep &= counts[ln] >= 2
-        kept_line = counts >= 2
-        renum = np.cumsum(kept_line) - 1
-        out = SurfaceLines(points=p[keep], face=out.face[keep], bary=out.bary[keep],
-                           line=renum[ln[keep]].astype(np.int32),
-                           closed=out.closed[kept_line])
-    return out
+    check_stripe_inputs(vertices, faces, direction, spacing)
+    return per_component(_stripe_lines_one, vertices, faces, direction, spacing)

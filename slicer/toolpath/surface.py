@@ -225,7 +225,8 @@ def spd_solver(matrix: sp.spmatrix | sp.sparray) -> Callable[[NDArray[np.float64
             return x
 
         probe = solve(np.ones(k))
-        if np.all(np.isfinite(probe)) and np.allclose(coo @ probe, 1.0, rtol=1e-6, atol=1e-6):
+        if np.all(np.isfinite(probe)) and np.allclose(coo @ probe, 1.0, rtol=tol.computed,
+                                                      atol=tol.computed):
             return solve
     except (RuntimeError, ValueError, ImportError):
         pass

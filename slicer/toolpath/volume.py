@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slicer.slabs import height_integral
+from slicer.status import VolumeStatus
 
 T = TypeVar("T")
 
@@ -135,7 +136,7 @@ def match_volume(
     lo: float | None = None  # largest tau known to give too much volume
     hi: float | None = None  # smallest tau known to give too little
     tau = float(np.clip(tau0, lo_t, hi_t))
-    status = "max_iterations"
+    status = VolumeStatus.MAX_ITERATIONS
     def trial(t: float) -> tuple[float, float]:
         """Evaluate tau = t, record it; (volume, relative error)."""
         volume, payload = evaluate(t)
@@ -147,7 +148,7 @@ def match_volume(
     for _ in range(max(1, max_iterations)):
         volume, err = trial(tau)
         if abs(err) < tolerance:
-            status = "converged"
+            status = VolumeStatus.CONVERGED
             break
         if err > 0:
             lo = tau if lo is None else max(lo, tau)
@@ -159,25 +160,25 @@ def match_volume(
             guess = tau * (1.0 + err)  # V ~ 1 / tau  =>  tau_new = tau V / V_req
         if lo is not None and hi is not None:
             if hi <= lo * (1.0 + 1e-4):
-                status = "stalled"  # the discrete line count jumps across the target
+                status = VolumeStatus.STALLED  # the discrete line count jumps across the target
                 break
             if not lo < guess < hi:
                 guess = float(np.sqrt(lo * hi))
         guess = float(np.clip(guess, lo_t, hi_t))
         if guess == tau:
-            status = "limit"
+            status = VolumeStatus.LIMIT
             break
         tau = guess
     best_err = min(abs(t.rel_error) for t in trials)
-    if (status in ("max_iterations", "stalled") and lo is not None and hi is not None
-            and best_err > SCAN_ABOVE * tolerance):
+    if (status in (VolumeStatus.MAX_ITERATIONS, VolumeStatus.STALLED)
+            and lo is not None and hi is not None and best_err > SCAN_ABOVE * tolerance):
         # V(tau) jumps where a line (and its connectors) appears or vanishes and is not
         # monotone between jumps: scan the bracket for a tau within the tolerance
         for tau in np.linspace(min(lo, hi) * (1.0 - SCAN_MARGIN),
                                max(lo, hi) * (1.0 + SCAN_MARGIN), SCAN_POINTS):
             _, err = trial(float(np.clip(tau, lo_t, hi_t)))
             if abs(err) < tolerance:
-                status = "converged-scan"
+                status = VolumeStatus.CONVERGED_SCAN
                 break
     best = int(np.argmin([abs(t.rel_error) for t in trials]))
     chosen = trials[best]

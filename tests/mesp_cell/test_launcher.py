@@ -178,7 +178,7 @@ def test_both_launch_files_take_home_and_tool_from_the_cell(monkeypatch: pytest.
 
     from mesp_cell.nodes.robot_node import cell_of, home_and_tool
     from planner.cell import load_cell
-    from planner.orientation import Reach
+    from planner.reach import Reach
 
     monkeypatch.setenv("MESP_HOME", str(tmp_path))
     cell = load_cell()

@@ -211,9 +211,9 @@ def test_robot_node_moves_into_the_gel_only_along_the_nozzle_axis(tmp_path: Path
     from mesp_cell.nodes.robot_node import RobotNode
     from planner import kinematics as kin
     from planner.cell import load_cell
-    from planner.orientation import Reach
     from planner.placement import fit_gel
     from planner.plan import plan
+    from planner.reach import Reach
     from tests.planner import synthetic as planner_synthetic
 
     cell = load_cell()

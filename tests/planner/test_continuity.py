@@ -7,8 +7,8 @@ import numpy as np
 from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.continuity import SWING_TOL_MM, subdivide, swing
-from planner.orientation import Reach
 from planner.plan import PlanResult
+from planner.reach import Reach
 
 # Two configurations of a real plan (a dome's rim, nozzle tilted towards the robot, the wrist
 # centre near the base axis): tips 0.73 mm apart, tool poses 6 deg apart, joints up to 41 deg
@@ -69,8 +69,9 @@ def test_a_plan_keeps_the_tip_on_the_path_and_the_joints_within_limits(
 
 def test_samples_failing_between_waypoints_are_named_with_their_reason(
         cell: CellConfig) -> None:
-    from planner.orientation import COLLISION, OK, Orientation
+    from planner.orientation import Orientation
     from planner.plan_report import between_status as _between_status
+    from planner.reach import COLLISION, OK
     from planner.samples import Samples
 
     reach = Reach(cell)

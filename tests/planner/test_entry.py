@@ -9,9 +9,9 @@ from core.stages import Toolpath
 from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.entry import PLUNGE, RETRACT, TRANSFER, safe_heights, safe_move, time_move
-from planner.orientation import OK, Reach
 from planner.placement import fit_gel
 from planner.plan import PlanResult, plan
+from planner.reach import OK, Reach
 from planner.status import PlanStatus
 from planner.timing import time_law
 

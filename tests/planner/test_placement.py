@@ -10,9 +10,9 @@ import pytest
 from core.errors import InputError
 from core.stages import Toolpath
 from planner.cell import CellConfig
-from planner.orientation import Reach
 from planner.placement import YAW_APART_DEG, choose_placement, fit_gel
 from planner.plan import plan
+from planner.reach import Reach
 from planner.status import PlanStatus
 from tests.planner import synthetic
 

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from planner.cell import CellConfig
-from planner.orientation import ALPHA, COLLISION, NO_IK, OK, REASONS, Orientation, Reach
+from planner.orientation import Orientation
 from planner.plan_report import stats, unreachable
+from planner.reach import ALPHA, COLLISION, NO_IK, OK, REASONS, Reach
 from planner.samples import Samples
 
 

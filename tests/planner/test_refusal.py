@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from planner.cell import CellConfig
-from planner.orientation import ALPHA, COLLISION, NO_IK, Reach
 from planner.placement import choose_placement
+from planner.reach import ALPHA, COLLISION, NO_IK, Reach
 from planner.refusal import bends, cause_of, waypoint_steps
 from planner.status import CAUSES, FIXES, Cause, Refused
 from tests.planner import synthetic

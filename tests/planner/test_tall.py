@@ -9,7 +9,7 @@ import numpy as np
 
 from core.stages import Toolpath
 from planner.cell import CellConfig, load_cell
-from planner.orientation import alpha_of, nozzle_axis
+from planner.nozzle_axis import alpha_of, nozzle_axis
 from planner.placement import fit_gel
 from planner.plan import plan
 from slicer.normals import repair_normals

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from planner.cell import CellConfig
-from planner.orientation import Reach, alpha_of
+from planner.nozzle_axis import alpha_of
 from planner.plan import plan
+from planner.reach import Reach
 from planner.upright import COMFORT, turn_towards, upright
 from tests.planner import synthetic
 

@@ -12,9 +12,10 @@ from core.stages import Toolpath
 from planner import kinematics as kin
 from planner import plan as plan_module
 from planner.cell import CellConfig
-from planner.orientation import Orientation, Reach
+from planner.orientation import Orientation
 from planner.placement import fit_gel
 from planner.plan import PlanResult, plan
+from planner.reach import Reach
 from planner.status import MESSAGES, PlanStatus
 from planner.trajectory import Trajectory
 from planner.verify import verify

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from core.errors import InputError
-from slicer.toolpath import geodesic, stripes, surface, width_error
+from slicer.toolpath import (
+    geodesic,
+    poisson_stripes,
+    stripe_trim,
+    stripes,
+    surface,
+    width_error,
+)
 from slicer.toolpath.lines import SurfaceLines
 from tests.slicer.toolpath.pattern_meshes import disc, dome, sliver_disc
 
@@ -67,21 +74,11 @@ def test_radial_stripes_beat_the_poisson_alternative() -> None:
         np.linalg.norm(seg[far, :2], axis=1) * np.linalg.norm(mid[far, :2], axis=1))
     assert np.median(cosang) > 0.95
     err = width_error.width_error(width_error.line_spacing(lines.points, lines.line), w)
-    poisson = stripes.poisson_stripe_lines(v, f, direction, w)
+    poisson = poisson_stripes.poisson_stripe_lines(v, f, direction, w)
     _valid(v, f, poisson, 2.0)
     err_p = width_error.width_error(width_error.line_spacing(poisson.points, poisson.line), w)
     assert err.p90 <= 0.35
     assert err.p90 <= 0.5 * err_p.p90
-
-
-def test_poisson_potential_recovers_an_integrable_field() -> None:
-    v, f = disc(10.0, 1.0, jitter=0.2)
-    # lines along y: z = direction^perp = -x... the potential is a linear function of x
-    direction = np.tile([0.0, 1.0, 0.0], (len(f), 1))
-    phi = stripes.poisson_potential(v, f, direction)
-    a = np.polyfit(v[:, 0], phi, 1)
-    assert abs(abs(a[0]) - 1.0) < 1e-6
-    assert np.allclose(phi, np.polyval(a, v[:, 0]), atol=1e-6)
 
 
 def test_stripe_input_errors() -> None:
@@ -117,7 +114,7 @@ def test_two_components_each_get_their_stripes() -> None:
     v = np.concatenate([v1, v2 + np.array([25.0, 0.0, 0.0])])
     f = np.concatenate([f1, f2 + len(v1)])
     direction = np.tile([0.0, 1.0, 0.0], (len(f), 1))
-    for fn in (stripes.stripe_lines, stripes.poisson_stripe_lines):
+    for fn in (stripes.stripe_lines, poisson_stripes.poisson_stripe_lines):
         lines = fn(v, f, direction, 2.0)
         _valid(v, f, lines, 3.0)
         x = np.array([lines.points[lines.line == i, 0].mean() for i in range(lines.n_lines)])
@@ -155,45 +152,6 @@ def test_stripes_running_past_a_branch_point_are_joined() -> None:
     assert cut_pts <= {tuple(p) for p in np.round(joined.points, 9).tolist()}
 
 
-def _polyline(points: list[np.ndarray]) -> SurfaceLines:
-    """Straight polylines (face/bary are placeholders: trim_converging only reads points)."""
-    pts = np.concatenate(points)
-    line = np.concatenate([np.full(len(p), i) for i, p in enumerate(points)]).astype(np.int32)
-    bary = np.tile([1.0, 0.0, 0.0], (len(pts), 1))
-    return SurfaceLines(pts, np.zeros(len(pts), np.int32), bary, line,
-                        np.zeros(len(points), bool))
-
-
-def test_trim_cuts_a_converging_stripe_where_it_comes_closer_than_the_ratio() -> None:
-    # a long line along x and a shorter one that approaches it: y = 2 - x / 10 for x in 0..15
-    x = np.linspace(0.0, 20.0, 201)
-    long_ = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
-    xs = np.linspace(0.0, 15.0, 151)
-    short = np.column_stack([xs, 2.0 - xs / 10.0, np.zeros_like(xs)])
-    far = long_ + np.array([0.0, -2.0, 0.0])  # parallel at the spacing: never cut
-    lines = _polyline([long_, short, far])
-    out = stripes.trim_converging(lines, 2.0, 0.7)
-    assert out.n_lines == 3
-    assert np.array_equal(out.points[out.line == 0], long_)
-    assert np.array_equal(out.points[out.line == 2], far)
-    kept = out.points[out.line == 1]
-    # cut where y = 2 - x / 10 reaches 0.7 * 2 = 1.4, i.e. at x = 6 (to the sample spacing)
-    assert kept[:, 0].max() == pytest.approx(6.0, abs=0.11)
-    assert kept[:, 1].min() >= 1.4 - 1e-9
-    assert kept[0, 0] == 0.0  # the far end is untouched
-
-
-def test_trim_keeps_closed_lines_and_drops_a_stripe_that_is_all_overlap() -> None:
-    x = np.linspace(0.0, 10.0, 51)
-    base = np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
-    twin = base[5:20] + np.array([0.0, 0.5, 0.0])  # short and 0.25 spacing away everywhere
-    lines = _polyline([base, twin])
-    out = stripes.trim_converging(lines, 2.0, 0.7)
-    assert out.n_lines == 1 and np.array_equal(out.points, base)
-    closed = lines._replace(closed=np.array([False, True]))
-    assert stripes.trim_converging(closed, 2.0, 0.7).n_lines == 2
-
-
 def test_radial_stripes_do_not_converge_after_trimming() -> None:
     # a disc 16 mm in radius at 2.5 mm spacing (the hemisphere example's layers): the radial
     # stripes converge towards the centre (spacing 0.5-0.75 W at r < 12 mm, p90 42 %);
@@ -214,4 +172,4 @@ def test_radial_stripes_do_not_converge_after_trimming() -> None:
         if longer.any():
             gap = np.linalg.norm(lines.points[ln == i][:, None] - lines.points[longer][None],
                                  axis=2).min(axis=1)
-            assert gap.min() >= stripes.CONVERGE_TRIM * w - 0.6  # point-to-point, edge ~0.8
+            assert gap.min() >= stripe_trim.CONVERGE_TRIM * w - 0.6  # point-to-point, edge ~0.8
