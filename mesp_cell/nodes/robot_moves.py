@@ -48,8 +48,8 @@ class RobotMoves:
     def _reach(self, job_dir: Path | None) -> Any:
         """The planner's reachability model of this cell, gel filled as the job's plan
         filled it (``fit_gel`` on the job's toolpath), or the cell's own fill."""
-        from planner.reach import Reach
         from planner.placement import fit_gel
+        from planner.reach import Reach
 
         cell = self.cell
         if job_dir is not None and (job_dir / "toolpath.npz").is_file():
