@@ -54,14 +54,16 @@ def test_a_fine_disc_needs_no_peak_vertex() -> None:
 def test_the_innermost_loop_of_a_coarse_disc_reaches_its_centre(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """Without the peak vertex the boundary distance tops out 1-2 mm short of the radius,
-    eq. 9's innermost loop closes that far out and leaves a pocket at the centre."""
+    eq. 9's innermost loop closes that far out and leaves a pocket at the centre. Rings joined
+    by connectors (no spiral, whose ridge line reaches the centre either way)."""
+    rings = JobConfig().with_overrides(toolpath={"spiral_rings": False})
     v, f = _coarse_disc()
     layers = Layers(v, f, np.zeros(len(f), np.int32), np.full(len(v), 0.6),
                     np.tile([0.0, 0.0, 1.0], (len(v), 1)))
-    with_peak = compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False,
+    with_peak = compute_toolpath(layers, rings, PROFILE, measure_baselines=False,
                                  workers=1).toolpath
     monkeypatch.setattr(peaks, "PEAK_GAIN", np.inf)
-    without = compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False,
+    without = compute_toolpath(layers, rings, PROFILE, measure_baselines=False,
                                workers=1).toolpath
 
     def innermost(tp: object) -> float:
