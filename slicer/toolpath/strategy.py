@@ -145,11 +145,14 @@ def _component_toolpath_unsafe(
         """One line along a band too narrow (or too wide) for W: its width is scaled to the
         band by the nozzle speed, point by point with ``pitch_width`` (``centre_scale``),
         then as a whole to the volume (``fit_flow``)."""
-        scale = surf.geometry.centre_scale(comp.w_mean) if cfg.pitch_width else None
+        scale = surf.centre_scale(comp.w_mean) if cfg.pitch_width else None
+        # medial lines meet at junctions: a connector from one to the next would run along
+        # a third, printing it twice; they are joined by travel moves
+        join = None if surf.geometry.loops == 2 else 0.0
 
         def fixed_lines(t: float) -> tuple[float, Built]:
             built = fit_flow(comp.build(lines, None, comp.w_mean, start, lifter, lift,
-                                        scale=scale))
+                                        join=join, scale=scale))
             return float(built.waypoints.deposited().sum()), built
 
         return match_volume(fixed_lines, required, cfg.volume_tolerance, 1.0, 1)
@@ -204,7 +207,7 @@ def _component_toolpath_unsafe(
     # contours with fit_bands: a band narrower than 1.5 W everywhere holds round(b / W) = 1
     # line, the centre line, whose width is then fitted to the band (centre_match)
     thin = 0.5 * THIN_BAND_FIT if cfg.fit_bands and used == Pattern.CONTOUR else THIN_BAND
-    centre = geo.centre_lines() if geo.max_distance < thin * comp.w_mean else None
+    centre = surf.centre_lines() if geo.max_distance < thin * comp.w_mean else None
     if centre is not None and centre.n_lines:
         # A band with holes at most about one width wide holds one line: along its middle.
         match, used, fallback = centre_match(centre), Pattern.CONTOUR, "centre-line"
@@ -240,7 +243,7 @@ def _component_toolpath_unsafe(
         options = [(match, used, fallback)]
         if used == Pattern.STRIPE:
             options.append((run(surf, Pattern.CONTOUR), Pattern.CONTOUR, "contour"))
-        centre = surf.geometry.centre_lines() if centre is None else centre
+        centre = surf.centre_lines() if centre is None else centre
         if centre.n_lines:
             options.append((centre_match(centre), Pattern.CONTOUR, "centre-line"))
         match, used, fallback = min(options, key=lambda o: abs(o[0].rel_error))

@@ -10,9 +10,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from slicer.toolpath.lines import SurfaceLines
-from slicer.toolpath.width_error import band_width, line_neighbours
+from slicer.toolpath.medial import across_width
+from slicer.toolpath.width_error import LineNeighbours, band_width, line_neighbours
 
 LONE_LINE = 2.0  # no other line within this x W: the line fills its band alone
+NEIGHBOUR_ANGLE = 45.0  # deg: a line met at a steeper angle is no neighbour (a junction)
 
 
 class MeasuredWidth(NamedTuple):
@@ -39,8 +41,11 @@ def measure_width(lines: SurfaceLines, width_pt: NDArray[np.float64],
 
     A lone line fills a band about one width wide by itself (a thin wall, a tube's shell):
     its nearest other line lies across the part, not beside it, so its spacing is the
-    band's width there: the distances to the boundary on its two sides (Euclidean: exact
-    on flat layers, and a band that thin is nearly flat across), against its own W.
+    band's width there: from the boundary on one side to the boundary on the other, across
+    the line (``medial.across_width``: at a line's end too, where the nearest boundary is
+    the end itself; Euclidean: exact on flat layers, and a band that thin is nearly flat
+    across; the nearest boundary on either side, ``band_width``, where the line across
+    meets no boundary), against its own W.
     ``boundary`` gives the (B, 3) mm ends a, b of the original layer's boundary segments
     (called when needed).
     """
@@ -50,10 +55,35 @@ def measure_width(lines: SurfaceLines, width_pt: NDArray[np.float64],
     spacing = near.spacing.copy()
     target = 0.5 * (width_pt + near.at_foot(width_pt))
     lone = ~np.isfinite(spacing) | (spacing > LONE_LINE * width_pt)
+    lone |= ~_parallel(lines, near)
     if lone.any():
-        spacing[lone] = band_width(lines.points[lone], *boundary())
+        a, b = boundary()
+        across = across_width(lines.points, lines.line, normals_pt, a, b)[lone]
+        spacing[lone] = np.where(np.isfinite(across), across,
+                                 band_width(lines.points[lone], a, b))
         target[lone] = width_pt[lone]
     ok = np.isfinite(spacing) & (width_pt > 0) & (target > 0)
     return MeasuredWidth(np.abs(spacing[ok] - target[ok]) / target[ok],
                          np.abs(spacing[ok] - width_pt[ok]) / width_pt[ok],
                          int(np.count_nonzero(lone & ok)))
+
+
+def _parallel(lines: SurfaceLines, near: LineNeighbours) -> NDArray[np.bool_]:
+    """(P,) bool, the neighbouring line runs within NEIGHBOUR_ANGLE of the point's line
+    there (True where there is no neighbour or a direction is undefined): a line met end-on
+    (a wall joining another at a junction, a line running into another) is no neighbour
+    beside it, and the distance to it no spacing."""
+    p = lines.points
+    n = len(p)
+    line = lines.line
+    i = np.arange(n)
+    start = np.flatnonzero(np.concatenate([[True], line[1:] != line[:-1]]))
+    stop = np.concatenate([start[1:], [n]])
+    first = np.repeat(start, stop - start)
+    last = np.repeat(stop - 1, stop - start)
+    own = p[np.minimum(i + 1, last)] - p[np.maximum(i - 1, first)]
+    j = near.near
+    other = p[np.minimum(j + 1, last[j])] - p[np.maximum(j - 1, first[j])]
+    norm = np.linalg.norm(own, axis=1) * np.linalg.norm(other, axis=1)
+    cos = np.abs(np.einsum("ij,ij->i", own, other)) / np.maximum(norm, 1e-300)
+    return (cos >= np.cos(np.radians(NEIGHBOUR_ANGLE))) | (norm <= 0.0) | (j == i)
