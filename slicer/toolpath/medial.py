@@ -107,7 +107,7 @@ def strip_width(vertices: NDArray[np.float64], faces: NDArray[np.int32],
     if len(bnd) == 0 or len(lines.points) < 2:
         return np.full(len(v), np.nan)
     normal = face_normals(v, f)[0][lines.face]
-    width = across_width(lines.points, lines.line, normal, v[bnd[:, 0]], v[bnd[:, 1]])
+    width = across_width(lines.points, lines.line, normal, v[bnd[:, 0]], v[bnd[:, 1]])[0]
     ok = np.isfinite(width)
     if not ok.any():
         return np.full(len(v), np.nan)
@@ -117,7 +117,7 @@ def strip_width(vertices: NDArray[np.float64], faces: NDArray[np.int32],
 
 def across_width(points: NDArray[np.float64], line: NDArray[np.int32],
                  normal: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]
-                 ) -> NDArray[np.float64]:
+                 ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """(P,) float64 mm, the width of the strip across each line point: from the boundary
     on one side to the boundary on the other, along the surface's direction perpendicular
     to the line there (in the tangent plane; NaN where a side is not among the OTHER_SIDE
@@ -125,12 +125,14 @@ def across_width(points: NDArray[np.float64], line: NDArray[np.int32],
     strip's width at a line's end too, where the nearest boundary is the end itself.
 
     points: (P, 3) mm, polylines stored consecutively; line: (P,) their ids; normal: (P, 3)
-    unit surface normals; a, b: (B, 3) mm, the boundary segments' ends.
+    unit surface normals; a, b: (B, 3) mm, the boundary segments' ends. Also returns (P,)
+    bool: the nearest boundary lies ahead of the point along its line rather than across
+    it (near an end).
     """
     p = np.asarray(points, dtype=np.float64)
     out = np.full(len(p), np.nan)
     if len(p) < 2 or len(a) == 0:
-        return out
+        return out, np.zeros(len(p), dtype=bool)
     i = np.arange(len(p))
     start = np.flatnonzero(np.concatenate([[True], line[1:] != line[:-1]]))
     stop = np.concatenate([start[1:], [len(p)]])
@@ -153,7 +155,14 @@ def across_width(points: NDArray[np.float64], line: NDArray[np.int32],
     right = np.where(hit & (s <= 0.0), -s, np.inf).min(axis=1)
     ok = np.isfinite(left) & np.isfinite(right)
     out[ok] = left[ok] + right[ok]
-    return out
+    ab = rb - ra
+    t = np.clip(-np.einsum("pkj,pkj->pk", ra, ab)
+                / np.maximum(np.einsum("pkj,pkj->pk", ab, ab), tol.zero), 0.0, 1.0)
+    foot = ra + t[..., None] * ab  # (P, k, 3) relative to the point
+    nearest = foot[np.arange(len(p)), np.argmin(np.linalg.norm(foot, axis=2), axis=1)]
+    ahead = (np.abs(np.einsum("pj,pj->p", nearest, along))
+             > np.abs(np.einsum("pj,pj->p", nearest, across)))
+    return out, ahead
 
 
 def _towards_boundary(v: NDArray[np.float64], f: NDArray[np.int64], bnd: NDArray[np.int64],

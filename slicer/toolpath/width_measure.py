@@ -41,11 +41,10 @@ def measure_width(lines: SurfaceLines, width_pt: NDArray[np.float64],
 
     A lone line fills a band about one width wide by itself (a thin wall, a tube's shell):
     its nearest other line lies across the part, not beside it, so its spacing is the
-    band's width there: from the boundary on one side to the boundary on the other, across
-    the line (``medial.across_width``: at a line's end too, where the nearest boundary is
-    the end itself; Euclidean: exact on flat layers, and a band that thin is nearly flat
-    across; the nearest boundary on either side, ``band_width``, where the line across
-    meets no boundary), against its own W.
+    band's width there: the distances to the boundary on its two sides (Euclidean: exact
+    on flat layers, and a band that thin is nearly flat across), against its own W; near a
+    line's end, where the nearest boundary lies ahead of the point (the end of the strip),
+    from one side to the other across the line (``medial.across_width``).
     ``boundary`` gives the (B, 3) mm ends a, b of the original layer's boundary segments
     (called when needed).
     """
@@ -58,8 +57,8 @@ def measure_width(lines: SurfaceLines, width_pt: NDArray[np.float64],
     lone |= ~_parallel(lines, near)
     if lone.any():
         a, b = boundary()
-        across = across_width(lines.points, lines.line, normals_pt, a, b)[lone]
-        spacing[lone] = np.where(np.isfinite(across), across,
+        across, ahead = across_width(lines.points, lines.line, normals_pt, a, b)
+        spacing[lone] = np.where(ahead[lone] & np.isfinite(across[lone]), across[lone],
                                  band_width(lines.points[lone], a, b))
         target[lone] = width_pt[lone]
     ok = np.isfinite(spacing) & (width_pt > 0) & (target > 0)
