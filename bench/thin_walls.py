@@ -21,7 +21,7 @@ import argparse
 import json
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 
 def measure(job_dir: Path) -> dict[str, Any]:
@@ -43,7 +43,7 @@ def measure(job_dir: Path) -> dict[str, Any]:
     rep = result.report
     row: dict[str, Any] = {"layers": int(layers.layer_count), "seconds": seconds}
     for name in ("contour", "stripe"):
-        cov = coverage[name]
+        cov = cast(dict[str, Any], coverage[name])
         w = rep["width_error"][name]
         row[name] = {"gap": cov["gap"], "overlap": cov["overlap"], "layers": cov["layers"],
                      "width_p50": None if w["n"] == 0 else w["p50"],

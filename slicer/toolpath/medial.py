@@ -27,7 +27,8 @@ from slicer.toolpath.surface import boundary_edges, edge_topology, face_normals,
 
 MEDIAL_ANGLE = 120.0  # deg: directions to the nearest boundary at least this far apart
 NEAREST = 16  # boundary pieces searched per vertex for the nearest
-OTHER_SIDE = 64  # ... for the nearest on the other side of the strip
+OTHER_SIDE = 64  # ... for the boundary on either side of a line
+TANGENT_SPAN = 3  # a line's direction: over this many points either way (crossings wiggle)
 
 
 def _outward(vertices: NDArray[np.float64], faces: NDArray[np.int32],
@@ -138,7 +139,7 @@ def across_width(points: NDArray[np.float64], line: NDArray[np.int32],
     stop = np.concatenate([start[1:], [len(p)]])
     first = np.repeat(start, stop - start)
     last = np.repeat(stop - 1, stop - start)
-    tangent = p[np.minimum(i + 1, last)] - p[np.maximum(i - 1, first)]
+    tangent = p[np.minimum(i + TANGENT_SPAN, last)] - p[np.maximum(i - TANGENT_SPAN, first)]
     across = np.cross(normal, tangent)
     across /= np.maximum(np.linalg.norm(across, axis=1), tol.zero)[:, None]
     along = np.cross(across, normal)
