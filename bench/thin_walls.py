@@ -13,6 +13,12 @@ directories (so the same tet meshes and layers), then compare:
     PYTHONPATH=OLD_TREE python bench/thin_walls.py JOBDIR ... --out before.json
     PYTHONPATH=.        python bench/thin_walls.py JOBDIR ... --out after.json
     python bench/thin_walls.py --compare before.json after.json
+
+and one layer as a picture (its lines, and the coverage samples left bare or covered twice):
+
+    PYTHONPATH=OLD_TREE python bench/thin_walls.py --dump JOBDIR LAYER before.npz
+    PYTHONPATH=.        python bench/thin_walls.py --dump JOBDIR LAYER after.npz
+    python bench/thin_walls.py --figure before.npz after.npz OUT.png
 """
 
 from __future__ import annotations
@@ -55,6 +61,77 @@ def measure(job_dir: Path) -> dict[str, Any]:
     return row
 
 
+def dump(job_dir: Path, index: int, out: Path) -> None:
+    """Layer ``index``'s waypoints, boundary and coverage samples (with their pass counts)
+    as printed by the code on PYTHONPATH, into ``out`` (npz)."""
+    import numpy as np
+
+    from core.stages import Layers
+    from slicer.config import load_job
+    from slicer.extrusion import load_profile
+    from slicer.toolpath.coverage import (
+        SAME_PASS,
+        _covered_pairs,
+        _passes,
+        _sample_layer,
+        _segments,
+    )
+    from slicer.toolpath.layer_build import layer_pattern, layer_toolpath, split_layers
+    from slicer.toolpath.linking import deposit_mask
+    from slicer.toolpath.surface import boundary_edges
+
+    job = load_job(job_dir / "job.toml")
+    layer = split_layers(Layers.load(job_dir))[index]
+    res = layer_toolpath(layer, layer_pattern(index, job.toolpath.first_pattern), job.toolpath,
+                         load_profile(job.extrusion.profile), False)
+    wp = res.waypoints
+    seg = _segments(wp, np.arange(len(wp.position)))  # type: ignore[arg-type]
+    points, normal = _sample_layer(layer.vertices, layer.faces.astype(np.int64), 8000,
+                                   np.random.default_rng(0))
+    i, j = _covered_pairs(points, normal, seg)
+    passes = _passes(len(points), i, j, seg, SAME_PASS * 2.0 * float(np.median(seg.half_width)))
+    err = [c.width_error for c in res.components]
+    np.savez(out, position=wp.position, deposit=deposit_mask(wp.extrude, wp.path),
+             boundary=layer.vertices[boundary_edges(layer.faces)], samples=points,
+             passes=passes, width_error=np.concatenate(err) if err else np.zeros(0))
+
+
+def figure(before: Path, after: Path, out: Path) -> None:
+    """Two dumps of one layer side by side: lines (extruding green, travel dotted), samples
+    left bare (red) and covered twice (blue), in the layer's two widest axes."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    from matplotlib.collections import LineCollection
+
+    data = [np.load(p) for p in (before, after)]
+    axes_xyz = np.argsort(np.ptp(data[0]["samples"], axis=0))[::-1][:2]
+    fig, axes = plt.subplots(1, 2, figsize=(16, 6.5))
+    for ax, d, name in zip(axes, data, ("before", "after"), strict=True):
+        b = d["boundary"][:, :, axes_xyz]
+        ax.add_collection(LineCollection(b, colors="k", lw=0.6))
+        pos = d["position"][:, axes_xyz]
+        seg = np.stack([pos[:-1], pos[1:]], axis=1)
+        ax.add_collection(LineCollection(seg[d["deposit"]], colors="green", lw=1.2))
+        ax.add_collection(LineCollection(seg[~d["deposit"]], colors="orange", lw=0.4,
+                                         linestyles="dotted"))
+        s, n = d["samples"][:, axes_xyz], d["passes"]
+        ax.scatter(*s[n == 0].T, s=2, c="red", label="bare")
+        ax.scatter(*s[n >= 2].T, s=2, c="blue", label="covered twice")
+        err = d["width_error"]
+        p90 = f"{100 * np.percentile(err, 90):.0f} %" if len(err) else "/"
+        ax.set_title(f"{name}: bare {100 * np.mean(n == 0):.1f} %, twice "
+                     f"{100 * np.mean(n >= 2):.1f} %, width error p90 {p90}")
+        ax.set_aspect("equal")
+        ax.autoscale()
+        ax.set_xlabel("mm")
+    axes[0].legend(loc="upper right", markerscale=4)
+    fig.tight_layout()
+    fig.savefig(out, dpi=80)
+
+
 def _pct(x: float | None) -> str:
     return "/" if x is None else f"{100.0 * x:.1f}"
 
@@ -95,7 +172,17 @@ def main() -> None:
     ap.add_argument("--out", type=Path, help="write every number as JSON")
     ap.add_argument("--compare", nargs=2, type=Path, metavar=("BEFORE", "AFTER"),
                     help="print a before/after table of two --out files")
+    ap.add_argument("--dump", nargs=3, metavar=("JOBDIR", "LAYER", "OUT"),
+                    help="write one layer's lines and coverage samples (npz)")
+    ap.add_argument("--figure", nargs=3, type=Path, metavar=("BEFORE", "AFTER", "OUT"),
+                    help="draw two --dump files side by side (PNG)")
     args = ap.parse_args()
+    if args.dump:
+        dump(Path(args.dump[0]), int(args.dump[1]), Path(args.dump[2]))
+        return
+    if args.figure:
+        figure(*args.figure)
+        return
     if args.compare:
         compare(*(json.loads(p.read_text()) for p in args.compare))
         return
