@@ -5,8 +5,10 @@ Per component: W per vertex from H (eq. 4); the component deformed to constant w
 surface at spacing tau * W_mean, tau by bisection until the deposited volume matches the
 integral of H (``volume.match_volume``). Choices made by measuring: a stripe component that
 is mostly narrower than NARROW_STRIPES * W is printed with contours; a band at most about
-one width wide holds one centre line whose width follows the band; a contour component that
-is no band gets eq. 9's lines in the fitted lines' holes or eq. 9's alone, and a stripe
+one width wide holds one centre line whose width follows the band (between its two sides,
+or its medial line where it has one boundary loop or many: ``medial.py``); a contour
+component that is no band gets eq. 9's lines in the fitted lines' holes or eq. 9's alone,
+and a stripe
 component partly narrow walls gets the walls' centre lines, whichever keeps its spacing
 better (p90 of the width error); a volume still off by THIN_SHORTFALL tries the other
 pattern and the centre line; one off by FLOW_FIT_ABOVE gets its nozzle speed scaled. A

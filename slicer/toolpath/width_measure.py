@@ -54,12 +54,18 @@ def measure_width(lines: SurfaceLines, width_pt: NDArray[np.float64],
     spacing = near.spacing.copy()
     target = 0.5 * (width_pt + near.at_foot(width_pt))
     lone = ~np.isfinite(spacing) | (spacing > LONE_LINE * width_pt)
-    lone |= ~_parallel(lines, near)
-    if lone.any():
+    end_on = ~lone & ~_parallel(lines, near)
+    if lone.any() or end_on.any():
         a, b = boundary()
         across, ahead = across_width(lines.points, lines.line, normals_pt, a, b)
-        spacing[lone] = np.where(ahead[lone] & np.isfinite(across[lone]), across[lone],
-                                 band_width(lines.points[lone], a, b))
+        band = np.full(len(spacing), np.nan)
+        some = lone | end_on
+        band[some] = np.where(ahead[some] & np.isfinite(across[some]), across[some],
+                              band_width(lines.points[some], a, b))
+        # a line met end-on is no neighbour where the line fills its band alone (a wall
+        # joining another); in a wider area (a ring's corner facing the next ring's) it is
+        lone |= end_on & (band < LONE_LINE * width_pt)
+        spacing[lone] = band[lone]
         target[lone] = width_pt[lone]
     ok = np.isfinite(spacing) & (width_pt > 0) & (target > 0)
     return MeasuredWidth(np.abs(spacing[ok] - target[ok]) / target[ok],
