@@ -4,8 +4,9 @@ The medial line of a strip stops where the strip's sides stop facing each other,
 a strip width short of a square end (the corners' bisectors meet there). A band printed
 along it then leaves that much bare at each end, and its volume falls short by the same
 share (on a short strip, a third of it). Each open end is carried straight on, along the
-line's direction at the end, by its distance to the boundary, so the band's square end
-reaches the boundary. An end that has another line within JUNCTION x that distance (where
+line's direction at the end, until it reaches the boundary (at most REACH x its distance
+to the nearest boundary: the end of a strip lies farther than its sides where the strip
+is longer than wide), so the band's square end reaches the boundary. An end that has another line within JUNCTION x that distance (where
 medial lines meet, a wall joining another) stays: carrying it on would print over the other.
 The new points are projected onto the surface (the nearest of the CANDIDATES faces with the
 nearest centres), STEP x the mean edge length apart, so consecutive points share a face or
@@ -26,10 +27,11 @@ from slicer.toolpath.resample import line_index
 from slicer.toolpath.surface import boundary_edges
 
 JUNCTION = 1.5  # another line nearer than this x the end's boundary distance: a junction
+REACH = 2.0  # the walk goes on for at most this x that distance, until the surface ends
 STEP = 0.4  # extension points this x the mean edge length apart
 CANDIDATES = 8  # faces searched for the projection of each extension point
 TANGENT_POINTS = 3  # the end's direction: from this many points back along the line
-OFF_SURFACE = 0.05  # a projected point farther than this x STEP from its target: the edge
+OFF_SURFACE = 0.05  # a projection this x STEP beside its target (in the surface): the edge
 
 
 def extend_to_boundary(lines: SurfaceLines, vertices: NDArray[np.float64],
@@ -79,7 +81,8 @@ def _walk(end: NDArray[np.float64], direction: NDArray[np.float64], length: floa
           f: NDArray[np.int64], centres: cKDTree, step: float
           ) -> tuple[NDArray[np.float64], NDArray[np.int32], NDArray[np.float64]]:
     """Points (k, 3), faces (k,) and barycentrics (k, 3) from ``end`` on along
-    ``direction`` for ``length`` mm, on the surface; none at a junction."""
+    ``direction`` until the surface ends, at most REACH x ``length`` mm (the end's
+    distance to the boundary); none at a junction."""
     none = (np.zeros((0, 3)), np.zeros(0, np.int32), np.zeros((0, 3)))
     norm = float(np.linalg.norm(direction))
     if length <= 0.25 * step or norm <= tol.zero:
@@ -87,6 +90,7 @@ def _walk(end: NDArray[np.float64], direction: NDArray[np.float64], length: floa
     others = [i for i in tree.query_ball_point(end, JUNCTION * length) if line[i] != own]
     if others:
         return none
+    near_side, length = length, REACH * length  # the end may lie farther than a side
     n = int(np.ceil(length / step))
     target = end + (np.arange(1, n + 1) * (length / n))[:, None] * (direction / norm)
     kk = min(CANDIDATES, len(f))
@@ -99,18 +103,24 @@ def _walk(end: NDArray[np.float64], direction: NDArray[np.float64], length: floa
         fc = near[:, c].astype(np.int32)
         b = np.clip(barycentric(target, v, f.astype(np.int32), fc), 0.0, None)
         b /= np.maximum(b.sum(axis=1, keepdims=True), tol.zero)
-        dist = np.linalg.norm(interpolate(v, f.astype(np.int32), fc, b) - target, axis=1)
+        off = interpolate(v, f.astype(np.int32), fc, b) - target
+        tri = v[f[fc]]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        normal /= np.maximum(np.linalg.norm(normal, axis=1), tol.zero)[:, None]
+        # off the surface within its plane (past its edge), not across it (a curved strip)
+        dist = np.linalg.norm(off - np.einsum("ij,ij->i", off, normal)[:, None] * normal,
+                              axis=1)
         better = dist < best
         best = np.where(better, dist, best)
         face = np.where(better, fc, face)
         bary = np.where(better[:, None], b, bary)
-    on = best <= OFF_SURFACE * step + 0.05 * length  # the strip's surface is nearly flat
+    on = best <= OFF_SURFACE * step
     # no nearer to another line than at the end: a wall running into a junction stops
     kk = min(8, len(line))
     dist, idx = tree.query(target, k=kk)
     dist = np.where(line[np.asarray(idx).reshape(n, kk)] != own, np.asarray(dist).reshape(n, kk),
                     np.inf).min(axis=1)
-    on &= dist > JUNCTION * length
+    on &= dist > JUNCTION * near_side
     stop = int(np.argmin(on)) if not on.all() else n
     pts = interpolate(v, f.astype(np.int32), face[:stop], bary[:stop])
     return pts, face[:stop], bary[:stop]
