@@ -6,11 +6,13 @@ along it then leaves that much bare at each end, and its volume falls short by t
 share (on a short strip, a third of it). Each open end is carried straight on, along the
 line's direction at the end, until it reaches the boundary (at most REACH x its distance
 to the nearest boundary: the end of a strip lies farther than its sides where the strip
-is longer than wide), so the band's square end reaches the boundary. An end that has another line within JUNCTION x that distance (where
-medial lines meet, a wall joining another) stays: carrying it on would print over the other.
-The new points are projected onto the surface (the nearest of the CANDIDATES faces with the
-nearest centres), STEP x the mean edge length apart, so consecutive points share a face or
-neighbouring faces as resampling needs; the walk stops where the surface ends.
+is longer than wide), so the band's square end reaches the boundary. An end that has
+another line within JUNCTION x that distance (where medial lines meet, a wall joining
+another) stays, and a walk stops as near to another line: carrying it on would print over
+the other. The new points are projected onto the surface (the nearest of the CANDIDATES
+faces with the nearest centres), STEP x the mean edge length apart, so consecutive points
+share a face or neighbouring faces as resampling needs; the walk stops where the surface
+ends.
 """
 
 from __future__ import annotations

@@ -671,8 +671,8 @@ def test_a_strip_one_and_a_half_widths_wide_prints_one_line_as_wide_as_it() -> N
     assert res.report["width_error"]["contour"]["p90"] < 0.02
     ext = res.toolpath.extrude
     assert np.allclose(np.median(res.toolpath.width[ext]), 1.4 * w, rtol=0.02)
-    cov = layer_coverage(layers, res.toolpath).summary()["contour"]
-    assert cov["gap"] < 0.01 and cov["overlap"] < 0.01
+    cov = layer_coverage(layers, res.toolpath)
+    assert cov.gap[0] < 0.01 and cov.overlap[0] < 0.01
 
 
 def test_a_sharp_wedge_prints_one_line_following_its_width() -> None:
@@ -696,5 +696,5 @@ def test_a_sharp_wedge_prints_one_line_following_its_width() -> None:
     # narrower than half a filament (the tip's last 21 mm): the narrowest filament
     assert np.allclose(tp.width[ext][~printable], CENTRE_WIDTH_SCALE[0] * w, rtol=0.05)
     assert res.report["width_error"]["contour"]["p50"] < 0.05
-    cov = layer_coverage(layers, tp).summary()["contour"]
-    assert cov["overlap"] < 0.01 and cov["gap"] < 0.06
+    cov = layer_coverage(layers, tp)
+    assert cov.overlap[0] < 0.01 and cov.gap[0] < 0.06
