@@ -164,12 +164,13 @@ def _component_toolpath_unsafe(
         return comp.vertices[edges[:, 0]], comp.vertices[edges[:, 1]]
 
     def measure(lines: SurfaceLines, flow: float = 1.0,
-                scale: NDArray[np.float64] | None = None) -> MeasuredWidth:
+                scale: NDArray[np.float64] | None = None,
+                junctions: bool = False) -> MeasuredWidth:
         """Width error of ``lines`` against the width they print at ``flow`` (and the
-        per-vertex width ``scale``)."""
+        per-vertex width ``scale``); ``junctions``: medial lines meeting at junctions."""
         h_pt, v_pt, w_pt = comp.values_at(lines.face, lines.bary, scale)
         return measure_width(lines, flowed_width(w_pt, v_pt, flow, comp.profile.speed_at(h_pt)),
-                        comp.normals[lines.face], boundary)
+                             comp.normals[lines.face], boundary, junctions)
 
     def p90(m: VolumeMatch[Built]) -> float:
         """p90 of the measured width error of a candidate (inf where nothing could be
@@ -262,9 +263,10 @@ def _component_toolpath_unsafe(
     t0 = time.perf_counter()
     # against the width the waypoints carry (flow-fitted components print wider or
     # narrower lines on purpose), and against the profile's W(H) for comparison
-    measured = measure(built.lines, built.flow, built.scale)
+    medial = fallback == "centre-line" and surf.geometry.loops != 2
+    measured = measure(built.lines, built.flow, built.scale, medial)
     err_nominal = (measured.error if built.flow == 1.0 and built.scale is None
-                   else measure(built.lines).error)
+                   else measure(built.lines, junctions=medial).error)
     err_undeformed = np.zeros(0)
     err_poisson = np.zeros(0)
     if measure_baselines:

@@ -27,8 +27,8 @@ class MeasuredWidth(NamedTuple):
 
 def measure_width(lines: SurfaceLines, width_pt: NDArray[np.float64],
                   normals_pt: NDArray[np.float64],
-                  boundary: Callable[[], tuple[NDArray[np.float64], NDArray[np.float64]]]
-                  ) -> MeasuredWidth:
+                  boundary: Callable[[], tuple[NDArray[np.float64], NDArray[np.float64]]],
+                  junctions: bool = False) -> MeasuredWidth:
     """The width error of ``lines`` printed at ``width_pt`` ((P,) float64 mm).
 
     Two neighbouring lines tile the layer when they lie (W_a + W_b) / 2 apart, each covering
@@ -47,6 +47,12 @@ def measure_width(lines: SurfaceLines, width_pt: NDArray[np.float64],
     from one side to the other across the line (``medial.across_width``).
     ``boundary`` gives the (B, 3) mm ends a, b of the original layer's boundary segments
     (called when needed).
+
+    With ``junctions`` (medial lines of walls meeting one another), a line met end-on (at
+    more than NEIGHBOUR_ANGLE: a wall joining another) is no neighbour where the point's
+    line fills its band alone: the distance to it is no spacing. Elsewhere such a point
+    keeps it (a ring's corner facing the next ring's, stripes converging: what is measured
+    there is real overlap or gap).
     """
     if len(lines.points) < 2:
         return MeasuredWidth(np.zeros(0), np.zeros(0), 0)
@@ -54,7 +60,7 @@ def measure_width(lines: SurfaceLines, width_pt: NDArray[np.float64],
     spacing = near.spacing.copy()
     target = 0.5 * (width_pt + near.at_foot(width_pt))
     lone = ~np.isfinite(spacing) | (spacing > LONE_LINE * width_pt)
-    end_on = ~lone & ~_parallel(lines, near)
+    end_on = ~lone & ~_parallel(lines, near) if junctions else np.zeros_like(lone)
     if lone.any() or end_on.any():
         a, b = boundary()
         across, ahead = across_width(lines.points, lines.line, normals_pt, a, b)
@@ -62,8 +68,6 @@ def measure_width(lines: SurfaceLines, width_pt: NDArray[np.float64],
         some = lone | end_on
         band[some] = np.where(ahead[some] & np.isfinite(across[some]), across[some],
                               band_width(lines.points[some], a, b))
-        # a line met end-on is no neighbour where the line fills its band alone (a wall
-        # joining another); in a wider area (a ring's corner facing the next ring's) it is
         lone |= end_on & (band < LONE_LINE * width_pt)
         spacing[lone] = band[lone]
         target[lone] = width_pt[lone]

@@ -28,12 +28,17 @@ def test_a_line_met_end_on_is_no_neighbour() -> None:
     a = np.column_stack([corners, np.zeros(len(corners))])
     b = np.roll(a, -1, axis=0)
     measured = measure_width(lines, np.full(len(lines.points), 2.0),
-                             np.tile([0.0, 0.0, 1.0], (len(lines.points), 1)), lambda: (a, b))
+                             np.tile([0.0, 0.0, 1.0], (len(lines.points), 1)), lambda: (a, b),
+                             junctions=True)
     assert len(measured.error) == len(lines.points)
     stem = lines.line == 0
     assert np.allclose(measured.error[stem], 0.0, atol=1e-6)
     # the bar's points facing the stem's opening see the corners 1.4 mm away, not the wall
     assert np.percentile(measured.error, 90) < 1e-6
+    # without junctions (rings, stripes) the line across is the neighbour, as before
+    plain = measure_width(lines, np.full(len(lines.points), 2.0),
+                          np.tile([0.0, 0.0, 1.0], (len(lines.points), 1)), lambda: (a, b))
+    assert plain.error.max() > 0.4
 
 
 def test_rings_in_a_wide_area_keep_their_neighbour_at_a_corner() -> None:
@@ -51,6 +56,6 @@ def test_rings_in_a_wide_area_keep_their_neighbour_at_a_corner() -> None:
     a = np.array([[-40.0, -40.0, 0.0], [40.0, -40.0, 0.0], [40.0, 40.0, 0.0], [-40.0, 40.0, 0.0]])
     measured = measure_width(lines, np.full(len(lines.points), 2.0),
                              np.tile([0.0, 0.0, 1.0], (len(lines.points), 1)),
-                             lambda: (a, np.roll(a, -1, axis=0)))
+                             lambda: (a, np.roll(a, -1, axis=0)), junctions=True)
     assert measured.lone == 0
     assert measured.error.max() == pytest.approx(np.sqrt(2.0) - 1.0, abs=0.02)
