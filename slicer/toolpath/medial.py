@@ -33,7 +33,7 @@ TANGENT_SPAN = 3  # a line's direction: over this many points either way (crossi
 
 def _outward(vertices: NDArray[np.float64], faces: NDArray[np.int32],
              edges: NDArray[np.int64]) -> NDArray[np.float64]:
-    """(n,) unit outward boundary normals in the tangent plane at the boundary vertices
+    """(n, 3) unit outward boundary normals in the tangent plane at the boundary vertices
     (zero elsewhere): the mean of their boundary edges' (interior on the left)."""
     normal = vertex_normals(vertices, faces)
     t = vertices[edges[:, 1]] - vertices[edges[:, 0]]
@@ -117,7 +117,8 @@ def strip_width(vertices: NDArray[np.float64], faces: NDArray[np.int32],
 
 
 def across_width(points: NDArray[np.float64], line: NDArray[np.int32],
-                 normal: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]
+                 normal: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64],
+                 rows: NDArray[np.int64] | None = None
                  ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
     """(P,) float64 mm, the width of the strip across each line point: from the boundary
     on one side to the boundary on the other, along the surface's direction perpendicular
@@ -126,23 +127,25 @@ def across_width(points: NDArray[np.float64], line: NDArray[np.int32],
     strip's width at a line's end too, where the nearest boundary is the end itself.
 
     points: (P, 3) mm, polylines stored consecutively; line: (P,) their ids; normal: (P, 3)
-    unit surface normals; a, b: (B, 3) mm, the boundary segments' ends. Also returns (P,)
-    bool: the nearest boundary lies ahead of the point along its line rather than across
-    it (near an end).
+    unit surface normals; a, b: (B, 3) mm, the boundary segments' ends; rows: only these
+    points (the results then have len(rows) entries). Also returns (P,) bool: the nearest
+    boundary lies ahead of the point along its line rather than across it (near an end).
     """
-    p = np.asarray(points, dtype=np.float64)
-    out = np.full(len(p), np.nan)
-    if len(p) < 2 or len(a) == 0:
-        return out, np.zeros(len(p), dtype=bool)
-    i = np.arange(len(p))
+    all_p = np.asarray(points, dtype=np.float64)
+    i = np.arange(len(all_p)) if rows is None else np.asarray(rows, dtype=np.int64)
+    out = np.full(len(i), np.nan)
+    if len(all_p) < 2 or len(a) == 0 or len(i) == 0:
+        return out, np.zeros(len(i), dtype=bool)
     start = np.flatnonzero(np.concatenate([[True], line[1:] != line[:-1]]))
-    stop = np.concatenate([start[1:], [len(p)]])
-    first = np.repeat(start, stop - start)
-    last = np.repeat(stop - 1, stop - start)
-    tangent = p[np.minimum(i + TANGENT_SPAN, last)] - p[np.maximum(i - TANGENT_SPAN, first)]
-    across = np.cross(normal, tangent)
+    stop = np.concatenate([start[1:], [len(all_p)]])
+    first = np.repeat(start, stop - start)[i]
+    last = np.repeat(stop - 1, stop - start)[i]
+    tangent = (all_p[np.minimum(i + TANGENT_SPAN, last)]
+               - all_p[np.maximum(i - TANGENT_SPAN, first)])
+    p = all_p[i]
+    across = np.cross(np.asarray(normal)[i], tangent)
     across /= np.maximum(np.linalg.norm(across, axis=1), tol.zero)[:, None]
-    along = np.cross(across, normal)
+    along = np.cross(across, np.asarray(normal)[i])
     pa, pb = split_segments(a, b)
     k = min(OTHER_SIDE, len(pa))
     _, near = cKDTree(0.5 * (pa + pb)).query(p, k=k)

@@ -63,10 +63,10 @@ def measure_width(lines: SurfaceLines, width_pt: NDArray[np.float64],
     end_on = ~lone & ~_parallel(lines, near) if junctions else np.zeros_like(lone)
     if lone.any() or end_on.any():
         a, b = boundary()
-        across, ahead = across_width(lines.points, lines.line, normals_pt, a, b)
+        some = np.flatnonzero(lone | end_on)
+        across, ahead = across_width(lines.points, lines.line, normals_pt, a, b, some)
         band = np.full(len(spacing), np.nan)
-        some = lone | end_on
-        band[some] = np.where(ahead[some] & np.isfinite(across[some]), across[some],
+        band[some] = np.where(ahead & np.isfinite(across), across,
                               band_width(lines.points[some], a, b))
         lone |= end_on & (band < LONE_LINE * width_pt)
         spacing[lone] = band[lone]
