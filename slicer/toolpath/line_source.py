@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from core.stages import Pattern
 from slicer.toolpath.contours import contour_lines
 from slicer.toolpath.lines import SurfaceLines, merge_lines
+from slicer.toolpath.medial import medial_lines, strip_width
 from slicer.toolpath.perimeter import (
     PERIMETER_CLIP,
     PERIMETER_MIN_DISTANCE,
@@ -140,6 +141,26 @@ class LineSource:
             return None
         pitch, _ = self.geometry.band_pitch(spacing)
         return np.asarray(np.clip(pitch / spacing, *CENTRE_WIDTH_SCALE), dtype=np.float64)
+
+    def centre_lines(self) -> SurfaceLines:
+        """One line along the middle of a component about one width wide: between its two
+        sides on a band with one hole (``SurfaceGeometry.centre_lines``), else its medial
+        line (``medial.medial_lines``: a strip without holes, walls between many holes)."""
+        geo = self.geometry
+        if geo.loops == 2:
+            return geo.centre_lines()
+        return medial_lines(geo.vertices, geo.faces)
+
+    def centre_scale(self, spacing: float) -> NDArray[np.float64] | None:
+        """(n,) float64, the local width of the strip over ``spacing`` (within
+        CENTRE_WIDTH_SCALE), the width its centre line prints at (``centre_lines``)."""
+        geo = self.geometry
+        if geo.loops == 2:
+            return geo.centre_scale(spacing)
+        width = strip_width(geo.vertices, geo.faces, self.centre_lines())
+        if not np.isfinite(width).all():
+            return None
+        return np.asarray(np.clip(width / spacing, *CENTRE_WIDTH_SCALE), dtype=np.float64)
 
     def narrow_walls(self, stripes: SurfaceLines) -> SurfaceLines:
         """``stripes`` kept where the component is at least 2 x wall_half_width wide, and

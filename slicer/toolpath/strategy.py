@@ -5,8 +5,10 @@ Per component: W per vertex from H (eq. 4); the component deformed to constant w
 surface at spacing tau * W_mean, tau by bisection until the deposited volume matches the
 integral of H (``volume.match_volume``). Choices made by measuring: a stripe component that
 is mostly narrower than NARROW_STRIPES * W is printed with contours; a band at most about
-one width wide holds one centre line whose width follows the band; a contour component that
-is no band gets eq. 9's lines in the fitted lines' holes or eq. 9's alone, and a stripe
+one width wide holds one centre line whose width follows the band (between its two sides,
+or its medial line where it has one boundary loop or many: ``medial.py``); a contour
+component that is no band gets eq. 9's lines in the fitted lines' holes or eq. 9's alone,
+and a stripe
 component partly narrow walls gets the walls' centre lines, whichever keeps its spacing
 better (p90 of the width error); a volume still off by THIN_SHORTFALL tries the other
 pattern and the centre line; one off by FLOW_FIT_ABOVE gets its nozzle speed scaled. A
@@ -146,11 +148,14 @@ def _component_toolpath_unsafe(
         """One line along a band too narrow (or too wide) for W: its width is scaled to the
         band by the nozzle speed, point by point with ``pitch_width`` (``centre_scale``),
         then as a whole to the volume (``fit_flow``)."""
-        scale = surf.geometry.centre_scale(comp.w_mean) if cfg.pitch_width else None
+        scale = surf.centre_scale(comp.w_mean) if cfg.pitch_width else None
+        # medial lines meet at junctions: a connector from one to the next would run along
+        # a third, printing it twice; they are joined by travel moves
+        join = None if surf.geometry.loops == 2 else 0.0
 
         def fixed_lines(t: float) -> tuple[float, Built]:
             built = fit_flow(comp.build(lines, None, comp.w_mean, start, lifter, lift,
-                                        scale=scale))
+                                        join=join, scale=scale))
             return float(built.waypoints.deposited().sum()), built
 
         return match_volume(fixed_lines, required, cfg.volume_tolerance, 1.0, 1)
@@ -160,12 +165,13 @@ def _component_toolpath_unsafe(
         return comp.vertices[edges[:, 0]], comp.vertices[edges[:, 1]]
 
     def measure(lines: SurfaceLines, flow: float = 1.0,
-                scale: NDArray[np.float64] | None = None) -> MeasuredWidth:
+                scale: NDArray[np.float64] | None = None,
+                junctions: bool = False) -> MeasuredWidth:
         """Width error of ``lines`` against the width they print at ``flow`` (and the
-        per-vertex width ``scale``)."""
+        per-vertex width ``scale``); ``junctions``: medial lines meeting at junctions."""
         h_pt, v_pt, w_pt = comp.values_at(lines.face, lines.bary, scale)
         return measure_width(lines, flowed_width(w_pt, v_pt, flow, comp.profile.speed_at(h_pt)),
-                        comp.normals[lines.face], boundary)
+                             comp.normals[lines.face], boundary, junctions)
 
     def p90(m: VolumeMatch[Built]) -> float:
         """p90 of the measured width error of a candidate (inf where nothing could be
@@ -205,7 +211,7 @@ def _component_toolpath_unsafe(
     # contours with fit_bands: a band narrower than 1.5 W everywhere holds round(b / W) = 1
     # line, the centre line, whose width is then fitted to the band (centre_match)
     thin = 0.5 * THIN_BAND_FIT if cfg.fit_bands and used == Pattern.CONTOUR else THIN_BAND
-    centre = geo.centre_lines() if geo.max_distance < thin * comp.w_mean else None
+    centre = surf.centre_lines() if geo.max_distance < thin * comp.w_mean else None
     if centre is not None and centre.n_lines:
         # A band with holes at most about one width wide holds one line: along its middle.
         match, used, fallback = centre_match(centre), Pattern.CONTOUR, "centre-line"
@@ -241,7 +247,7 @@ def _component_toolpath_unsafe(
         options = [(match, used, fallback)]
         if used == Pattern.STRIPE:
             options.append((run(surf, Pattern.CONTOUR), Pattern.CONTOUR, "contour"))
-        centre = surf.geometry.centre_lines() if centre is None else centre
+        centre = surf.centre_lines() if centre is None else centre
         if centre.n_lines:
             options.append((centre_match(centre), Pattern.CONTOUR, "centre-line"))
         match, used, fallback = min(options, key=lambda o: abs(o[0].rel_error))
@@ -258,9 +264,10 @@ def _component_toolpath_unsafe(
     t0 = time.perf_counter()
     # against the width the waypoints carry (flow-fitted components print wider or
     # narrower lines on purpose), and against the profile's W(H) for comparison
-    measured = measure(built.lines, built.flow, built.scale)
+    medial = fallback == "centre-line" and surf.geometry.loops != 2
+    measured = measure(built.lines, built.flow, built.scale, medial)
     err_nominal = (measured.error if built.flow == 1.0 and built.scale is None
-                   else measure(built.lines).error)
+                   else measure(built.lines, junctions=medial).error)
     err_undeformed = np.zeros(0)
     err_poisson = np.zeros(0)
     if measure_baselines:

@@ -648,3 +648,53 @@ def test_first_layer_beta_applies_to_layer_zero_only() -> None:
     assert abs(res.report["layer_volume_error"]) < 0.02
     with pytest.raises(Exception, match="first_layer_beta"):
         JobConfig().with_overrides(toolpath={"first_layer_beta": 0.2})
+
+
+def _one_layer(v: NDArray[np.float64], f: NDArray[np.int32]) -> tuple[ToolpathResult, Layers]:
+    layers = flat_layer(v, f, 1.0)
+    return compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False,
+                            workers=1), layers
+
+
+def test_a_strip_one_and_a_half_widths_wide_prints_one_line_as_wide_as_it() -> None:
+    """A strip without holes 1.4 W wide holds one line along its middle, end to end, printed
+    as wide as the strip (before: a loop whose two sides lay 0.4 W apart, p90 35 %, 3 %
+    of the strip bare)."""
+    from slicer.toolpath.coverage import layer_coverage
+    from tests.slicer.toolpath.test_medial import strip
+
+    w = float(PROFILE.width(np.array([1.0]))[0])
+    res, layers = _one_layer(*strip(60.0, 1.4 * w, 0.6))
+    assert res.report["thin_fallback"]["centre-line"] == 1
+    assert res.report["extrusion_starts"]["total"] == 1
+    assert abs(res.report["layer_volume_error"]) < 0.01
+    assert res.report["width_error"]["contour"]["p90"] < 0.02
+    ext = res.toolpath.extrude
+    assert np.allclose(np.median(res.toolpath.width[ext]), 1.4 * w, rtol=0.02)
+    cov = layer_coverage(layers, res.toolpath)
+    assert cov.gap[0] < 0.01 and cov.overlap[0] < 0.01
+
+
+def test_a_sharp_wedge_prints_one_line_following_its_width() -> None:
+    """A wedge 1.4 W wide at its base, 7 deg at its tip: one line along the bisector into the
+    tip, as wide as the wedge wherever a filament can be (down to half W; before: rings
+    pinched at the tip, p90 71 %, 32 % bare and 22 % covered twice), the volume matched."""
+    from slicer.toolpath.coverage import layer_coverage
+    from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
+    from tests.slicer.toolpath.test_medial import wedge
+
+    w = float(PROFILE.width(np.array([1.0]))[0])
+    v, f = wedge(60.0, float(np.degrees(np.arctan(0.7 * w / 60.0))), 0.5)
+    res, layers = _one_layer(v, f)
+    assert res.report["thin_fallback"]["centre-line"] == 1
+    assert abs(res.report["layer_volume_error"]) < 0.01
+    tp = res.toolpath
+    ext = tp.extrude & (tp.position[:, 0] < 59.0)
+    local = 2.0 * tp.position[ext, 0] * 0.7 * w / 60.0  # the wedge's width there
+    printable = local >= CENTRE_WIDTH_SCALE[0] * w
+    assert np.allclose(tp.width[ext][printable], local[printable], rtol=0.1)
+    # narrower than half a filament (the tip's last 21 mm): the narrowest filament
+    assert np.allclose(tp.width[ext][~printable], CENTRE_WIDTH_SCALE[0] * w, rtol=0.05)
+    assert res.report["width_error"]["contour"]["p50"] < 0.05
+    cov = layer_coverage(layers, tp)
+    assert cov.overlap[0] < 0.01 and cov.gap[0] < 0.06
