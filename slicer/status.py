@@ -86,3 +86,4 @@ class ComponentFallback(Status):
     CENTRE_LINE = "centre-line", "a band too narrow for two lines: one line along its middle"
     HOLES_FILLED = "holes-filled", "fitted contours left holes (no band): eq. 9's lines fill them"
     NO_BAND = "no-band", "no band: eq. 9's contours alone kept their spacing better"
+    WALLS = "walls", "stripes on the wide part, one line along each narrow wall"

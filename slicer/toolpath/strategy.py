@@ -27,7 +27,7 @@ from core.stages import LayerMesh, Pattern
 from core.tolerance import tol
 from slicer.config import ToolpathConfig
 from slicer.extrusion import ExtrusionProfile
-from slicer.status import FLOW_FITTED, DeformStatus, VolumeStatus
+from slicer.status import FLOW_FITTED, ComponentFallback, DeformStatus, VolumeStatus
 from slicer.toolpath.component import Built, Component
 from slicer.toolpath.deform import deform_to_constant_width
 from slicer.toolpath.line_source import LineSource
@@ -194,14 +194,14 @@ def _component_toolpath_unsafe(
         return match
 
     used = pattern
-    fallback = ""
+    fallback: ComponentFallback = ComponentFallback.NONE
     if (pattern == Pattern.STRIPE
             and surf.geometry.mostly_narrow(0.5 * NARROW_STRIPES * comp.w_mean, NARROW_SHARE)):
         # stripes across a band this narrow are shorter than W once their ends are cut back
         # by W / 2: a zig-zag of stubs and connectors. A component that is mostly such a
         # band (a thin wall, a tube's shell, with or without a wider spot) is printed as on
         # a contour layer; there is no across-the-band direction to stagger anyway.
-        used, fallback = Pattern.CONTOUR, "contour"
+        used, fallback = Pattern.CONTOUR, ComponentFallback.CONTOUR
     # partly such walls (a junction between two tubes): also tried with stripes on the wide
     # part only and the walls' centre lines (``LineSource.narrow_walls``)
     geo = surf.geometry
@@ -214,13 +214,13 @@ def _component_toolpath_unsafe(
     centre = surf.centre_lines() if geo.max_distance < thin * comp.w_mean else None
     if centre is not None and centre.n_lines:
         # A band with holes at most about one width wide holds one line: along its middle.
-        match, used, fallback = centre_match(centre), Pattern.CONTOUR, "centre-line"
+        match, used, fallback = centre_match(centre), Pattern.CONTOUR, ComponentFallback.CENTRE_LINE
     else:
         if used == Pattern.CONTOUR:
             surf = surf.with_band_fit_holes_filled(comp.w_mean)
         no_band = used == Pattern.CONTOUR and surf.fill_holes
         if no_band:
-            fallback = fallback or "holes-filled"
+            fallback = fallback or ComponentFallback.HOLES_FILLED
         match = run_joined(surf, used)
         if no_band and abs(match.rel_error) <= FLOW_FIT_ABOVE:
             # No band: the fitted lines with eq. 9's in their holes, or eq. 9 alone (a
@@ -230,7 +230,7 @@ def _component_toolpath_unsafe(
             plain = LineSource(surf.geometry, False, perimeter)
             alt = run_joined(plain, used)
             if abs(alt.rel_error) <= FLOW_FIT_ABOVE and p90(alt) < p90(match):
-                surf, match, fallback = plain, alt, "no-band"
+                surf, match, fallback = plain, alt, ComponentFallback.NO_BAND
         if walls:
             # kept where the lines keep their spacing better (the aorta's plaque junction:
             # stripe p90 34 -> 21 %; a plate with two holes, whose junction is short stubs
@@ -239,19 +239,20 @@ def _component_toolpath_unsafe(
             alt = run_joined(walled, used)
             if (abs(alt.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
                     and p90(alt) < p90(match)):
-                surf, match, fallback = walled, alt, "walls"
-    if abs(match.rel_error) > THIN_SHORTFALL and fallback != "centre-line":
+                surf, match, fallback = walled, alt, ComponentFallback.WALLS
+    if abs(match.rel_error) > THIN_SHORTFALL and fallback != ComponentFallback.CENTRE_LINE:
         # A band about one width wide: stripes across it vanish once their ends are cut
         # back by W / 2, contours come out as a doubled loop. Try the other pattern and a
         # single line along the middle (bands with holes); keep the closest volume.
-        options = [(match, used, fallback)]
+        options: list[tuple[VolumeMatch[Built], int, ComponentFallback]] = [
+            (match, used, fallback)]
         if used == Pattern.STRIPE:
-            options.append((run(surf, Pattern.CONTOUR), Pattern.CONTOUR, "contour"))
+            options.append((run(surf, Pattern.CONTOUR), Pattern.CONTOUR, ComponentFallback.CONTOUR))
         centre = surf.centre_lines() if centre is None else centre
         if centre.n_lines:
-            options.append((centre_match(centre), Pattern.CONTOUR, "centre-line"))
+            options.append((centre_match(centre), Pattern.CONTOUR, ComponentFallback.CENTRE_LINE))
         match, used, fallback = min(options, key=lambda o: abs(o[0].rel_error))
-    if abs(match.rel_error) > FLOW_FIT_ABOVE and fallback != "centre-line":
+    if abs(match.rel_error) > FLOW_FIT_ABOVE and fallback != ComponentFallback.CENTRE_LINE:
         # The line count is discrete (a band of 1.7 W holds 2 lines, not 1.7): where no
         # spacing matches the volume, the flow per length does.
         fitted = fit_flow(match.result)
@@ -264,18 +265,18 @@ def _component_toolpath_unsafe(
     t0 = time.perf_counter()
     # against the width the waypoints carry (flow-fitted components print wider or
     # narrower lines on purpose), and against the profile's W(H) for comparison
-    medial = fallback == "centre-line" and surf.geometry.loops != 2
+    medial = fallback == ComponentFallback.CENTRE_LINE and surf.geometry.loops != 2
     measured = measure(built.lines, built.flow, built.scale, medial)
     err_nominal = (measured.error if built.flow == 1.0 and built.scale is None
                    else measure(built.lines, junctions=medial).error)
     err_undeformed = np.zeros(0)
     err_poisson = np.zeros(0)
     if measure_baselines:
-        if deformed is comp.vertices or fallback == "centre-line":
+        if deformed is comp.vertices or fallback == ComponentFallback.CENTRE_LINE:
             b = built  # no deformation (or one line): the direct lines are the lines
         else:
-            direct = replace(LineSource.of(comp.vertices, comp.faces,
-                                           cfg.fit_bands and fallback != "no-band", perimeter,
+            banded = cfg.fit_bands and fallback != ComponentFallback.NO_BAND
+            direct = replace(LineSource.of(comp.vertices, comp.faces, banded, perimeter,
                                            cfg.boundary_distance, cfg.stripe_field),
                              wall_half_width=surf.wall_half_width)
             if used == Pattern.CONTOUR:
