@@ -20,6 +20,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from core.status import JobState
 from mesp_cell.estop_check import confirm_estop
 from mesp_cell.jobs import JobStore
 from mesp_cell.messages import EStop
@@ -92,7 +93,7 @@ class EStopNode(LifecycleNode):
         # publish, which waits for nothing)
         printing = tuple(j.id for j in self.store.query(self.bus_config.cell,
                                                         ("printing", "interrupted"))
-                         if j.state == "printing" or j.updated >= sent)
+                         if j.state == JobState.PRINTING or j.updated >= sent)
         done = confirm_estop(self.bus, self.store, self.bus_config.cell, sent, printing)
         conn.sendall(json.dumps({"sent_t": sent, "lines": done.lines(),
                                  "confirmed": done.confirmed}).encode() + b"\n")

@@ -30,6 +30,7 @@ from mesp_cell.bus.session import Bus, BusConfig
 from mesp_cell.bus.signing import Role, Signer
 from mesp_cell.command_policy import sender_refusal
 from mesp_cell.messages import Command, Heartbeat, Reply
+from mesp_cell.states import NodeState
 
 log = logging.getLogger("mesp")
 
@@ -60,7 +61,7 @@ class LifecycleNode:
         self.name = name
         self.bus_config = bus_config
         self.params = params
-        self.state = "unconfigured"
+        self.state = NodeState.UNCONFIGURED
         self.bus: Bus | None = None
         self.stopping = threading.Event()
         self.failed = ""  # why the node stopped on its own (a worker thread died)
@@ -85,36 +86,36 @@ class LifecycleNode:
 
     # -- transitions -----------------------------------------------------------------------
     def configure(self) -> None:
-        assert self.state == "unconfigured"
+        assert self.state == NodeState.UNCONFIGURED
         self.bus = Bus(self.bus_config, self.name, role=self.bus_role)
         self.bus.default_authorize = self.authorize
         self.on_configure()
-        self.state = "inactive"
+        self.state = NodeState.INACTIVE
 
     def activate(self) -> None:
-        assert self.state == "inactive" and self.bus is not None
+        assert self.state == NodeState.INACTIVE and self.bus is not None
         self.on_activate()
-        self.state = "active"
+        self.state = NodeState.ACTIVE
         self.bus.presence_warm()  # its view of the others is up before it counts as up
         self._beat()  # presence only once the node can do its job: a signed beat, then the token
         self.bus.announce()
         self.spawn(self._heartbeat, "heartbeat")
 
     def deactivate(self) -> None:
-        if self.state == "active":
-            self.state = "inactive"
+        if self.state == NodeState.ACTIVE:
+            self.state = NodeState.INACTIVE
             self.on_deactivate()
 
     def shutdown(self) -> None:
         self.deactivate()
         self.stopping.set()
         try:
-            if self.state != "unconfigured":  # a failed configure released its own devices
+            if self.state != NodeState.UNCONFIGURED:  # a failed configure released its own devices
                 self.on_shutdown()
         finally:
             if self.bus is not None:
                 self.bus.close()
-            self.state = "finalized"
+            self.state = NodeState.FINALIZED
 
     # -- helpers ---------------------------------------------------------------------------
     def spawn(self, target: Any, name: str) -> threading.Thread:
@@ -168,7 +169,7 @@ class LifecycleNode:
             dead = [t.name for t in self._workers if not t.is_alive()]
             if dead:  # say so and stop: a node that cannot answer must not look healthy
                 self.failed = f"worker thread {dead[0]} died"
-                self.state = "failed"
+                self.state = NodeState.FAILED
                 log.error("%s: %s; stopping so the launcher restarts it", self.name, self.failed)
             self._beat()
             if dead:

@@ -25,6 +25,7 @@ import numpy as np
 
 from core.errors import InputError
 from core.report import update_report
+from core.status import JobState
 from mesp_cell.bus.session import Bus
 from mesp_cell.drivers.stream import StreamPlan, sha256_of
 from mesp_cell.jobs import JobRecord, JobStore
@@ -42,6 +43,7 @@ from mesp_cell.nodes.eta_estimate import EtaEstimate
 from mesp_cell.nodes.ink_at_rest import add_rest_ink, deposition_s, rest_ink
 from mesp_cell.nodes.print_check import check_print
 from mesp_cell.profiles import stale_reason
+from mesp_cell.states import RobotMode, StreamEnd
 from slicer.extrusion import ExtrusionProfile, load_job_profile
 
 log = logging.getLogger("mesp.supervisor")
@@ -86,7 +88,7 @@ class PrintLoop:
             ev = self._wait_event(job_id, self.timeouts["move"])
         except Stopped as exc:
             return f"nozzle not retracted: {exc}"
-        if ev.kind != "moved":
+        if ev.kind != StreamEnd.MOVED:
             return f"nozzle not retracted: {ev.reason or 'move interrupted'}"
         return "nozzle retracted along its axis out of the gel and parked at home"
 
@@ -118,7 +120,7 @@ class PrintLoop:
         if not reply.ok:
             raise Stopped(reply.reason)
         ev = self._wait_event(job_id, self.timeouts["move"])
-        if ev.kind != "moved":
+        if ev.kind != StreamEnd.MOVED:
             raise Stopped(ev.reason or "move interrupted")
 
     def _extruder(self, verb: str, **args: Any) -> None:
@@ -137,7 +139,7 @@ class PrintLoop:
         return profile
 
     def _print(self, job: JobRecord) -> None:
-        resume = job.state in ("paused", "interrupted")
+        resume = job.state in (JobState.PAUSED, JobState.INTERRUPTED)
         traj = Path(job.dir) / "trajectory.npz"
         if not traj.is_file():
             raise InputError(f"job {job.id} has no trajectory.npz", "re-submit the job")
@@ -163,7 +165,8 @@ class PrintLoop:
             self.current, self.request = job.id, ""
         while not self.events.empty():
             self.events.get_nowait()
-        self.store.transition(job.id, "printing", "resumed" if resume else "", expect=job.state)
+        self.store.transition(job.id, JobState.PRINTING, "resumed" if resume else "",
+                              expect=job.state)
         ext0 = self.extruder_state.volume if self.extruder_state else 0.0
         try:
             if not resume:
@@ -181,7 +184,7 @@ class PrintLoop:
                 # stream it, then lead and prime at rest at the first deposition sample
                 ev = self._stream(job, plan, ext0, start, after, end=first)
                 self._drain(job.id)
-                if ev.kind != "done":
+                if ev.kind != StreamEnd.DONE:
                     raise Stopped(ev.reason or "stream stopped")
                 start = first
             lead_n = round(self.lead_s / self.dt)
@@ -206,10 +209,10 @@ class PrintLoop:
                                        - deposition_s(plan, start - 1, self.lead_s))
 
             ev = self._stream(job, plan, ext0, start, after, started=started)
-            if ev.kind == "done":
+            if ev.kind == StreamEnd.DONE:
                 self._extruder("stop")
             self._drain(job.id)
-            if ev.kind != "done":
+            if ev.kind != StreamEnd.DONE:
                 raise Stopped(ev.reason or "stream stopped")
             self._move(job.id, to="home")
             volume = self._volume(job, ext0)
@@ -225,7 +228,7 @@ class PrintLoop:
                             "calibrated": profile.calibrated}}})
             if not check.ok:
                 raise InputError(check.reason, check.fix)
-            self.store.transition(job.id, "done")
+            self.store.transition(job.id, JobState.DONE)
         except Stopped as exc:
             self._stopped(job, plan, str(exc), ext0)
         finally:
@@ -269,12 +272,12 @@ class PrintLoop:
                                 self._volume(job, ext0))
             req = self.request
             if req == "pause":
-                self.store.transition(job.id, "paused", "paused by the operator")
+                self.store.transition(job.id, JobState.PAUSED, "paused by the operator")
             elif req == "abort":  # aborted once out of the gel (or why it could not be)
-                self.store.transition(job.id, "aborted",
+                self.store.transition(job.id, JobState.ABORTED,
                                       f"aborted by the operator; {self._retract(job.id)}")
             else:
-                self.store.transition(job.id, "interrupted", reason)
+                self.store.transition(job.id, JobState.INTERRUPTED, reason)
             log.warning("job %s stopped: %s", job.id, reason)
             # the screw delivers a little more after the stop: counted before the job goes on
             self._settle_screw()
@@ -319,16 +322,16 @@ class PrintLoop:
         epoch); its ``status`` then says how it ended."""
         rs = self.robot_state
         if (rs is None or rs.t < asked + 1.0 or rs.job_id != job_id
-                or rs.mode not in ("idle", "stopped")):
+                or rs.mode not in (RobotMode.IDLE, RobotMode.STOPPED)):
             return None
         reply = self._request(self.names["robot"], Command.make("status"), 1.0)
-        if not reply.ok or reply.value("mode") not in ("idle", "stopped"):
+        if not reply.ok or reply.value("mode") not in (RobotMode.IDLE, RobotMode.STOPPED):
             return None
         log.warning("the end of the stream of %s did not arrive; the robot is %s", job_id,
                     reply.value("mode"))
         why = str(reply.value("stop_reason", ""))
-        return StreamEvent(job_id, "done" if reply.value("mode") == "idle" else "stopped",
-                           why, rs.sample, float(reply.value("stop_t", time.time())))
+        kind = StreamEnd.DONE if reply.value("mode") == RobotMode.IDLE else StreamEnd.STOPPED
+        return StreamEvent(job_id, kind, why, rs.sample, float(reply.value("stop_t", time.time())))
 
     def _monitor(self, job: JobRecord, plan: StreamPlan, ext0: float) -> StreamEvent:
         """Follow the stream (checkpoints, progress) until it ends. The robot node switches
@@ -354,7 +357,7 @@ class PrintLoop:
                               1.0)
             try:
                 ev = self.events.get(timeout=0.01)
-                if ev.job_id == job.id and ev.kind in ("done", "stopped"):
+                if ev.job_id == job.id and ev.kind in (StreamEnd.DONE, StreamEnd.STOPPED):
                     return ev
             except queue.Empty:
                 pass

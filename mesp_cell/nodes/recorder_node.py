@@ -28,6 +28,7 @@ from mesp_cell.messages import (
     StreamEvent,
 )
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
+from mesp_cell.states import RobotMode, StreamEnd
 from mesp_cell.telemetry import JobRecorder
 
 log = logging.getLogger("mesp.recorder")
@@ -96,7 +97,7 @@ class RecorderNode(LifecycleNode):
             if msg.job_id != self.job_id:
                 # the moves after a job's end still name it: a new recording only for another
                 # job or the same job streaming again (resumed)
-                if msg.job_id == self.finished and msg.mode != "streaming":
+                if msg.job_id == self.finished and msg.mode != RobotMode.STREAMING:
                     return
                 self._close("next job")
                 self._open(msg.job_id, msg.t)
@@ -107,7 +108,7 @@ class RecorderNode(LifecycleNode):
             return
         self.recorder.record(msg)
         if (isinstance(msg, StreamEvent) and msg.job_id == self.job_id
-                and msg.kind in ("done", "stopped")):
+                and msg.kind in (StreamEnd.DONE, StreamEnd.STOPPED)):
             self.finished = self.job_id
             self._close(msg.kind)
 

@@ -23,6 +23,7 @@ from mesp_cell.drivers.robot_base import RobotDriver, ServoConfig
 from mesp_cell.drivers.stream import ServoStream, StreamPlan
 from mesp_cell.messages import Command, Reply, StreamEvent
 from mesp_cell.nodes.interlock import Interlock
+from mesp_cell.states import RobotMode, StreamEnd
 
 log = logging.getLogger("mesp.robot")
 
@@ -104,7 +105,7 @@ class RobotMoves:
             return "move interrupted" if self._abort_move.is_set() else ""
 
         def run() -> None:
-            self.mode = "moving"
+            self.mode = RobotMode.MOVING
             log.info("move of %s to %s (%d servo samples)", cmd.job_id, to,
                      0 if path is None else path.samples)
             ok, why = False, "move interrupted"
@@ -118,10 +119,10 @@ class RobotMoves:
                 log.exception("move failed")
                 why = f"move failed: {exc}"
             finally:
-                self.mode = "idle" if ok else "stopped"
+                self.mode = RobotMode.IDLE if ok else RobotMode.STOPPED
                 self._in_motion.clear()
             log.info("move of %s to %s %s", cmd.job_id, to, "done" if ok else why)
-            self._event(StreamEvent(cmd.job_id, "moved" if ok else "stopped",
+            self._event(StreamEvent(cmd.job_id, StreamEnd.MOVED if ok else StreamEnd.STOPPED,
                                     "" if ok else why, -1, time.time()))
 
         self._in_motion.set()

@@ -60,6 +60,7 @@ from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from mesp_cell.nodes.print_ledger import Ledger
 from mesp_cell.nodes.robot_driver import cell_of, home_and_tool, make_driver
 from mesp_cell.nodes.robot_moves import RobotMoves
+from mesp_cell.states import RobotMode, StreamEnd
 
 END = "\x00end"  # guard reason that ends a stream at its ``end`` sample (not a stop)
 
@@ -119,7 +120,7 @@ class RobotNode(RobotMoves, LifecycleNode):
         self.job_id = ""
         self.job_dir: Path | None = None
         self.stream: ServoStream | None = None
-        self.mode = "idle"
+        self.mode = RobotMode.IDLE
         self.stop_reason, self.stop_t = "", 0.0
         self.waypoint = -1
         self._motion_lock = threading.Lock()
@@ -332,7 +333,7 @@ class RobotNode(RobotMoves, LifecycleNode):
         self.stop_reason = ""
 
         def run() -> None:
-            self.mode = "streaming"
+            self.mode = RobotMode.STREAMING
             try:
                 result = stream.run()
             except Exception as exc:  # the end event must go out whatever happened
@@ -348,15 +349,15 @@ class RobotNode(RobotMoves, LifecycleNode):
                 result = StreamResult(True, "", result.last_sample, result.stop_t,
                                       result.periods)
             self.stop_reason, self.stop_t = result.reason, result.stop_t
-            self.mode = "idle" if result.done else "stopped"
+            self.mode = RobotMode.IDLE if result.done else RobotMode.STOPPED
             if result.reason:
                 log.warning("stream of %s stopped at sample %d: %s", job, result.last_sample,
                             result.reason)
             log.info("stream of %s: oldest extruder state while depositing %.0f ms", job,
                      self.interlock.max_age * 1000)
             self._in_motion.clear()
-            self._event(StreamEvent(job, "done" if result.done else "stopped", result.reason,
-                                    result.last_sample, result.stop_t))
+            kind = StreamEnd.DONE if result.done else StreamEnd.STOPPED
+            self._event(StreamEvent(job, kind, result.reason, result.last_sample, result.stop_t))
 
         self._in_motion.set()
         self._motion = self.spawn(run, "stream")
@@ -374,7 +375,7 @@ class RobotNode(RobotMoves, LifecycleNode):
             q, qd = np.degrees(d.joints()), np.degrees(d.joint_speeds())
             stream, plan = self.stream, self.plan
             self._seq += 1
-            mode = "fault" if (not d.connected() or d.protective_stopped()) else self.mode
+            mode = RobotMode.FAULT if (not d.connected() or d.protective_stopped()) else self.mode
             self.bus.publish("state", RobotState(
                 time.time(), self._seq, tuple(q.tolist()), tuple(qd.tolist()),
                 tuple(d.tcp_mm().tolist()), mode, self.job_id,

@@ -33,6 +33,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from core.errors import InputError
+from core.status import JobState
 from mesp_cell.jobs import JobRecord, JobStore
 from mesp_cell.messages import (
     FAULT_ESTOP,
@@ -89,7 +90,7 @@ class SupervisorNode(PrintLoop, LifecycleNode):
         self.park = ""  # an aborted job whose nozzle the work loop retracts and parks home
         self._lock = threading.Lock()
         for job in self.store.query(self.cell, ("printing",)):
-            self.store.transition(job.id, "interrupted", "supervisor restarted mid-print")
+            self.store.transition(job.id, JobState.INTERRUPTED, "supervisor restarted mid-print")
         self.store.unconfirm_all(self.cell)  # a new session confirms its first job itself
 
     def on_activate(self) -> None:
@@ -155,15 +156,15 @@ class SupervisorNode(PrintLoop, LifecycleNode):
             with self._lock:
                 # still printing: the print loop stops it (a job already paused while the loop
                 # waits for its screw to settle is aborted below, like any paused job)
-                if self.current == job.id and self.store.get(job.id).state == "printing":
+                if self.current == job.id and self.store.get(job.id).state == JobState.PRINTING:
                     self.request = cmd.verb
                     self._request(self.names["robot"], Command.make("stop", reason=cmd.verb), 2.0)
                     return Reply.done()
             if cmd.verb == "pause":
-                why = self.store.check_transition(job, "paused")
+                why = self.store.check_transition(job, JobState.PAUSED)
                 return Reply.refuse(why or f"job {job.id} is not printing")
-            self.store.transition(job.id, "aborted", "aborted by the operator")
-            if job.state in ("paused", "interrupted"):
+            self.store.transition(job.id, JobState.ABORTED, "aborted by the operator")
+            if job.state in (JobState.PAUSED, JobState.INTERRUPTED):
                 with self._lock:  # its nozzle may still be in the gel
                     self.park = job.id
             return Reply.done()
@@ -189,13 +190,14 @@ class SupervisorNode(PrintLoop, LifecycleNode):
             if job is None:
                 continue
             try:
-                if job.state == "submitted":
-                    self._stage(job, "slice", "sliced")
-                elif job.state == "sliced":
+                if job.state == JobState.SUBMITTED:
+                    self._stage(job, "slice", JobState.SLICED)
+                elif job.state == JobState.SLICED:
                     self._job_profile(job)
-                    self._stage(job, "plan", "planned")
-                elif job.state == "planned":
-                    self.store.transition(job.id, "ready_check", READY_REASON, expect="planned")
+                    self._stage(job, "plan", JobState.PLANNED)
+                elif job.state == JobState.PLANNED:
+                    self.store.transition(job.id, JobState.READY_CHECK, READY_REASON,
+                                          expect=JobState.PLANNED)
                     log.info("job %s waits for the operator to confirm the tank", job.id)
                 else:
                     why = self._need("robot", "extruder")
@@ -219,12 +221,12 @@ class SupervisorNode(PrintLoop, LifecycleNode):
 
     def _fail(self, job_id: str, reason: str) -> None:
         try:
-            self.store.transition(job_id, "failed", reason)
+            self.store.transition(job_id, JobState.FAILED, reason)
         except InputError:  # aborted by the operator meanwhile: that state stands
             log.info("job %s not failed (%s): %s", job_id, self.store.get(job_id).state, reason)
 
 
-    def _stage(self, job: JobRecord, verb: str, next_state: str) -> None:
+    def _stage(self, job: JobRecord, verb: str, next_state: JobState) -> None:
         node = self.names["slicer" if verb == "slice" else "planner"]
         if node not in self.alive:
             return
@@ -235,7 +237,7 @@ class SupervisorNode(PrintLoop, LifecycleNode):
         if reply.ok:
             self.store.transition(job.id, next_state, expect=job.state)
         else:
-            self.store.transition(job.id, "failed", f"{verb}: {reply.reason}")
+            self.store.transition(job.id, JobState.FAILED, f"{verb}: {reply.reason}")
 
     def _request_while_alive(self, node: str, cmd: Command, timeout: float) -> Reply:
         """``_request``, given up as soon as ``node`` leaves the bus (its process died or
