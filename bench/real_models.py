@@ -18,6 +18,7 @@ Writes ``OUT/table.md`` (one row per model, the table the README shows) and ``OU
 from __future__ import annotations
 
 import argparse
+import fcntl
 import json
 import resource
 import subprocess
@@ -183,6 +184,23 @@ def table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def _merge(results: Path, row: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The rows of ``results`` (model -> row), with ``row`` written into it if given. Under
+    a lock and re-read each time: runs over different models may share one OUT (steps of a
+    subset of models at a time, in parallel)."""
+    with open(results.with_suffix(".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        rows: dict[str, Any] = {}
+        if results.is_file():
+            rows = {r["model"]: r for r in json.loads(results.read_text())}
+        if row is not None:
+            rows[row["model"]] = row
+            tmp = results.with_suffix(".tmp")
+            tmp.write_text(json.dumps(list(rows.values()), indent=1))
+            tmp.replace(results)
+    return rows
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--models", nargs="*", help="model names (file stems); default: all")
@@ -202,17 +220,17 @@ def main(argv: list[str] | None = None) -> int:
     if not steps or any(s not in STEPS for s in steps):
         ap.error(f"--steps takes names from {','.join(STEPS)}")
     corpus = shared_models(args.shared) + generated_models(args.out / "generated")
+    order = {m.name: i for i, m in enumerate(corpus)}
     if args.models:
         corpus = [m for m in corpus if m.name in set(args.models)]
     results = args.out / "results.json"
-    rows: dict[str, Any] = {}
-    if results.is_file():
-        rows = {r["model"]: r for r in json.loads(results.read_text())}
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = _merge(results)
     for m in corpus:  # results.json after each model, so a stopped run keeps what it did
-        rows[m.name] = run_model(m, args.out, args.size, args.timeout, args.extra, steps,
-                                 args.voxel, rows.get(m.name))
-        results.write_text(json.dumps(list(rows.values()), indent=1))
-    text = table(list(rows.values()))
+        row = run_model(m, args.out, args.size, args.timeout, args.extra, steps, args.voxel,
+                        rows.get(m.name))
+        rows = _merge(results, row)
+    text = table(sorted(rows.values(), key=lambda r: order.get(r["model"], len(order))))
     (args.out / "table.md").write_text(text + "\n")
     print(text)
     return 0
