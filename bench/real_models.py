@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import fcntl
 import json
+import math
 import resource
 import subprocess
 import sys
@@ -146,12 +147,17 @@ def run_model(model: CorpusModel, out: Path, size: float, timeout: float, extra:
     return row
 
 
+def _missing(x: Any) -> bool:
+    """No value: not measured (None) or nothing to measure it on (nan, e.g. no stripe layer)."""
+    return x is None or (isinstance(x, float) and math.isnan(x))
+
+
 def _pct(x: Any) -> str:
-    return "" if x is None else f"{100 * x:.1f}"
+    return "" if _missing(x) else f"{100 * x:.1f}"
 
 
 def _num(x: Any, fmt: str = ".2f") -> str:
-    return "" if x is None else format(x, fmt)
+    return "" if _missing(x) else format(x, fmt)
 
 
 def table(rows: list[dict[str, Any]]) -> str:
@@ -178,7 +184,7 @@ def table(rows: list[dict[str, Any]]) -> str:
             f"{_num(m['height_max_mm'])} | {_pct(m['gap_contour'])}/{_pct(m['overlap_contour'])} | "
             f"{_pct(m['gap_stripe'])}/{_pct(m['overlap_stripe'])} | "
             f"{_pct(m['width_p90_contour'])}/{_pct(m['width_p90_stripe'])} | "
-            f"{_num(None if m['volume_error'] is None else 100 * m['volume_error'])} | {alpha} | "
+            f"{_num(None if _missing(m['volume_error']) else 100 * m['volume_error'])} | {alpha} | "
             f"{_pct(m['speed_within_5pct'])} | {_pct(m['interior_infill'])} | "
             f"{_pct(m['pores'])} | {_num(m['surface_error_mm'], '.3f')} |")
     return "\n".join(lines)
