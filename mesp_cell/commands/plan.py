@@ -203,8 +203,8 @@ def _checked_fix(job_dir: Path, toolpath: Any, cell: Any, cell_path: Path | None
         user = read_toml(cell_path) if cell_path is not None else {}
         path.write_text(tomli_w.dumps(as_cell(user, found.option)))
         settings = ", ".join(f"{k} = {v:g}" for k, v in found.option.items())
-        return (f"plan with --cell {shown(path)} (the cell you planned with, plus [planning] {settings}; "
-                "checked: the job plans ok with it)")
+        return (f"plan with --cell {shown(path)} (the cell you planned with, plus [planning] "
+                f"{settings}; checked: the job plans ok with it)")
     fix = checked_fix(try_cells(toolpath, cell_path), fallback)
     return fix + (f"; planning options tried: {'; '.join(found.tried)}" if found.tried else "")
 
