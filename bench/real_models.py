@@ -93,8 +93,11 @@ def _metrics(report: dict[str, Any]) -> dict[str, Any]:
         "volume_error": tp.get("volume_error"),
         "downward_waypoints": _get(tp, "printing_direction", "downward"),
         "plan_status": plan.get("status"),
-        "alpha_min": _get(plan, "alpha_deg", "min"),
-        "alpha_max": _get(plan, "alpha_deg", "max"),
+        # as verified on the executed trajectory: both ends of every depositing step
+        "alpha_min": (_get(plan, "verified", "alpha_deg") or [None, None])[0],
+        "alpha_max": (_get(plan, "verified", "alpha_deg") or [None, None])[1],
+        "verified": _get(plan, "verified", "ok"),
+        "min_clearance_mm": _get(plan, "verified", "min_clearance_mm"),
         "speed_within_5pct": _get(plan, "speed_ratio", "within_5pct"),
         "interior_infill": ins.get("interior_infill_ratio"),
         "pores": ins.get("pore_ratio"),
@@ -164,7 +167,8 @@ def table(rows: list[dict[str, Any]]) -> str:
     """The markdown table: one row per model."""
     head = ("| model | slice | plan | inspect | tets | layers | H CV | H max mm | "
             "gap/overlap contour % | gap/overlap stripe % | width p90 contour/stripe % | "
-            "volume err % | alpha deg | speed kept % | infill % | pores % | surface err mm |")
+            "volume err % | alpha deg | clearance mm | speed kept % | infill % | pores % | "
+            "surface err mm |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in rows:
         m = r["metrics"]
@@ -185,8 +189,9 @@ def table(rows: list[dict[str, Any]]) -> str:
             f"{_pct(m['gap_stripe'])}/{_pct(m['overlap_stripe'])} | "
             f"{_pct(m['width_p90_contour'])}/{_pct(m['width_p90_stripe'])} | "
             f"{_num(None if _missing(m['volume_error']) else 100 * m['volume_error'])} | {alpha} | "
-            f"{_pct(m['speed_within_5pct'])} | {_pct(m['interior_infill'])} | "
-            f"{_pct(m['pores'])} | {_num(m['surface_error_mm'], '.3f')} |")
+            f"{_num(m.get('min_clearance_mm'), '.1f')} | {_pct(m['speed_within_5pct'])} | "
+            f"{_pct(m['interior_infill'])} | {_pct(m['pores'])} | "
+            f"{_num(m['surface_error_mm'], '.3f')} |")
     return "\n".join(lines)
 
 
