@@ -10,6 +10,7 @@ refusal offers ``--repair`` (checked by mesp) is sliced again with it, as a user
                                           [--steps slice,plan,inspect] [--voxel 0.4]
                                           [--out bench/results/real_models] [--timeout 900]
                                           [--extra ARG ...]  (more ``mesp slice`` arguments)
+                                          [--table]  (only the table again, from OUT)
 
 Writes ``OUT/table.md`` (one row per model, the table the README shows) and ``OUT/results.json``
 (every number, per model), and prints the table with stage timings and peak memory.
@@ -226,10 +227,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="folder of the shared real models")
     ap.add_argument("--extra", nargs=argparse.REMAINDER, default=[],
                     help="more mesp slice arguments (the rest of the line)")
+    ap.add_argument("--table", action="store_true",
+                    help="run nothing: the table again from OUT (metrics re-read from each "
+                         "job's report.json)")
     args = ap.parse_args(argv)
     steps = tuple(s.strip() for s in args.steps.split(",") if s.strip())
     if not steps or any(s not in STEPS for s in steps):
         ap.error(f"--steps takes names from {','.join(STEPS)}")
+    if args.table:
+        steps = ()
     corpus = shared_models(args.shared) + generated_models(args.out / "generated")
     order = {m.name: i for i, m in enumerate(corpus)}
     if args.models:
@@ -238,6 +244,12 @@ def main(argv: list[str] | None = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     rows = _merge(results)
     for m in corpus:  # results.json after each model, so a stopped run keeps what it did
+        if args.table:
+            if m.name in rows:
+                report = args.out / m.name / "report.json"
+                rows[m.name]["metrics"] = _metrics(
+                    json.loads(report.read_text()) if report.is_file() else {})
+            continue
         row = run_model(m, args.out, args.size, args.timeout, args.extra, steps, args.voxel,
                         rows.get(m.name))
         rows = _merge(results, row)
