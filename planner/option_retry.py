@@ -72,7 +72,8 @@ def retry(toolpath: Toolpath, cell: CellConfig, why: Cause | PlanStatus) -> Retr
     for option in CANDIDATES.get(why, ()):
         if not _widens(cell, option):
             continue  # the cell already allows this much
-        trial = replace(cell, planning=replace(cell.planning, **option))
+        settings: dict[str, Any] = dict(option)
+        trial = replace(cell, planning=replace(cell.planning, **settings))
         if why == Cause.BEND:
             left = len(bends(directions(toolpath, trial).toolpath, trial).waypoint)
             if left:
