@@ -16,7 +16,18 @@ from typing import NamedTuple
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-SHARED_MODELS = ROOT.parent / "shared" / "models"
+
+
+def _shared_folder(start: Path) -> Path:
+    """The nearest ``shared/models`` beside ``start`` or beside one of its parents (a git
+    worktree lies deeper than the main checkout); ``start.parent/shared/models`` if none."""
+    for parent in start.parents:
+        if (parent / "shared" / "models").is_dir():
+            return parent / "shared" / "models"
+    return start.parent / "shared" / "models"
+
+
+SHARED_MODELS = _shared_folder(ROOT)
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".off", ".3mf", ".msh", ".vtk", ".vtu")
 
 

@@ -10,6 +10,7 @@ refusal offers ``--repair`` (checked by mesp) is sliced again with it, as a user
                                           [--steps slice,plan,inspect] [--voxel 0.4]
                                           [--out bench/results/real_models] [--timeout 900]
                                           [--extra ARG ...]  (more ``mesp slice`` arguments)
+                                          [--table]  (only the table again, from OUT)
 
 Writes ``OUT/table.md`` (one row per model, the table the README shows) and ``OUT/results.json``
 (every number, per model), and prints the table with stage timings and peak memory.
@@ -18,7 +19,9 @@ Writes ``OUT/table.md`` (one row per model, the table the README shows) and ``OU
 from __future__ import annotations
 
 import argparse
+import fcntl
 import json
+import math
 import resource
 import subprocess
 import sys
@@ -91,8 +94,11 @@ def _metrics(report: dict[str, Any]) -> dict[str, Any]:
         "volume_error": tp.get("volume_error"),
         "downward_waypoints": _get(tp, "printing_direction", "downward"),
         "plan_status": plan.get("status"),
-        "alpha_min": _get(plan, "alpha_deg", "min"),
-        "alpha_max": _get(plan, "alpha_deg", "max"),
+        # as verified on the executed trajectory: both ends of every depositing step
+        "alpha_min": (_get(plan, "verified", "alpha_deg") or [None, None])[0],
+        "alpha_max": (_get(plan, "verified", "alpha_deg") or [None, None])[1],
+        "verified": _get(plan, "verified", "ok"),
+        "min_clearance_mm": _get(plan, "verified", "min_clearance_mm"),
         "speed_within_5pct": _get(plan, "speed_ratio", "within_5pct"),
         "interior_infill": ins.get("interior_infill_ratio"),
         "pores": ins.get("pore_ratio"),
@@ -145,19 +151,25 @@ def run_model(model: CorpusModel, out: Path, size: float, timeout: float, extra:
     return row
 
 
+def _missing(x: Any) -> bool:
+    """No value: not measured (None) or nothing to measure it on (nan, e.g. no stripe layer)."""
+    return x is None or (isinstance(x, float) and math.isnan(x))
+
+
 def _pct(x: Any) -> str:
-    return "" if x is None else f"{100 * x:.1f}"
+    return "" if _missing(x) else f"{100 * x:.1f}"
 
 
 def _num(x: Any, fmt: str = ".2f") -> str:
-    return "" if x is None else format(x, fmt)
+    return "" if _missing(x) else format(x, fmt)
 
 
 def table(rows: list[dict[str, Any]]) -> str:
     """The markdown table: one row per model."""
     head = ("| model | slice | plan | inspect | tets | layers | H CV | H max mm | "
             "gap/overlap contour % | gap/overlap stripe % | width p90 contour/stripe % | "
-            "volume err % | alpha deg | speed kept % | infill % | pores % | surface err mm |")
+            "volume err % | alpha deg | clearance mm | speed kept % | infill % | pores % | "
+            "surface err mm |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for r in rows:
         m = r["metrics"]
@@ -177,10 +189,28 @@ def table(rows: list[dict[str, Any]]) -> str:
             f"{_num(m['height_max_mm'])} | {_pct(m['gap_contour'])}/{_pct(m['overlap_contour'])} | "
             f"{_pct(m['gap_stripe'])}/{_pct(m['overlap_stripe'])} | "
             f"{_pct(m['width_p90_contour'])}/{_pct(m['width_p90_stripe'])} | "
-            f"{_num(None if m['volume_error'] is None else 100 * m['volume_error'])} | {alpha} | "
-            f"{_pct(m['speed_within_5pct'])} | {_pct(m['interior_infill'])} | "
-            f"{_pct(m['pores'])} | {_num(m['surface_error_mm'], '.3f')} |")
+            f"{_num(None if _missing(m['volume_error']) else 100 * m['volume_error'])} | {alpha} | "
+            f"{_num(m.get('min_clearance_mm'), '.1f')} | {_pct(m['speed_within_5pct'])} | "
+            f"{_pct(m['interior_infill'])} | {_pct(m['pores'])} | "
+            f"{_num(m['surface_error_mm'], '.3f')} |")
     return "\n".join(lines)
+
+
+def _merge(results: Path, row: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The rows of ``results`` (model -> row), with ``row`` written into it if given. Under
+    a lock and re-read each time: runs over different models may share one OUT (steps of a
+    subset of models at a time, in parallel)."""
+    with open(results.with_suffix(".lock"), "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        rows: dict[str, Any] = {}
+        if results.is_file():
+            rows = {r["model"]: r for r in json.loads(results.read_text())}
+        if row is not None:
+            rows[row["model"]] = row
+            tmp = results.with_suffix(".tmp")
+            tmp.write_text(json.dumps(list(rows.values()), indent=1))
+            tmp.replace(results)
+    return rows
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -197,22 +227,33 @@ def main(argv: list[str] | None = None) -> int:
                     help="folder of the shared real models")
     ap.add_argument("--extra", nargs=argparse.REMAINDER, default=[],
                     help="more mesp slice arguments (the rest of the line)")
+    ap.add_argument("--table", action="store_true",
+                    help="run nothing: the table again from OUT (metrics re-read from each "
+                         "job's report.json)")
     args = ap.parse_args(argv)
     steps = tuple(s.strip() for s in args.steps.split(",") if s.strip())
     if not steps or any(s not in STEPS for s in steps):
         ap.error(f"--steps takes names from {','.join(STEPS)}")
+    if args.table:
+        steps = ()
     corpus = shared_models(args.shared) + generated_models(args.out / "generated")
+    order = {m.name: i for i, m in enumerate(corpus)}
     if args.models:
         corpus = [m for m in corpus if m.name in set(args.models)]
     results = args.out / "results.json"
-    rows: dict[str, Any] = {}
-    if results.is_file():
-        rows = {r["model"]: r for r in json.loads(results.read_text())}
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = _merge(results)
     for m in corpus:  # results.json after each model, so a stopped run keeps what it did
-        rows[m.name] = run_model(m, args.out, args.size, args.timeout, args.extra, steps,
-                                 args.voxel, rows.get(m.name))
-        results.write_text(json.dumps(list(rows.values()), indent=1))
-    text = table(list(rows.values()))
+        if args.table:
+            if m.name in rows:
+                report = args.out / m.name / "report.json"
+                rows[m.name]["metrics"] = _metrics(
+                    json.loads(report.read_text()) if report.is_file() else {})
+            continue
+        row = run_model(m, args.out, args.size, args.timeout, args.extra, steps, args.voxel,
+                        rows.get(m.name))
+        rows = _merge(results, row)
+    text = table(sorted(rows.values(), key=lambda r: order.get(r["model"], len(order))))
     (args.out / "table.md").write_text(text + "\n")
     print(text)
     return 0

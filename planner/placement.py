@@ -300,7 +300,9 @@ def choose_placement(reach: Reach, toolpath: Toolpath, samples: int = 32) -> Pla
     if len(found.waypoint):
         served = steps.extrude.copy()
         served[found.waypoint] = False
-        steps = steps._replace(extrude=served)
+        arrive = steps.arrive.copy()
+        arrive[found.waypoint] = 0.0  # neither step of a bent waypoint is asked for alpha
+        steps = steps._replace(extrude=served, arrive=arrive)
     N = len(toolpath)
     idx = np.unique(np.linspace(0, N - 1, min(N, samples)).round().astype(int))
     # every waypoint the printing direction alone does not serve (a bend against the layer):

@@ -31,7 +31,6 @@ from planner.continuity import SWING_TOL_MM, subdivide
 from planner.entry import safe_heights, safe_move
 from planner.nozzle_axis import alpha_of
 from planner.orientation import Orientation, choose
-from planner.path_smoothing import smooth_along_paths
 from planner.placement import Placement, bbox, choose_placement, fit_gel, model_transform
 from planner.plan_report import (
     between_status,
@@ -42,6 +41,7 @@ from planner.plan_report import (
     unreachable_message,
     upright_report,
 )
+from planner.printability import directions
 from planner.reach import OK, Reach
 from planner.samples import (
     Samples,
@@ -62,7 +62,6 @@ from planner.timing import (
 from planner.trajectory import Trajectory
 from planner.upright import upright
 from planner.verify import verify
-from slicer.normals import repair_normals
 
 
 @dataclass(frozen=True)
@@ -112,9 +111,7 @@ def plan(
     cell = fit_gel(cell, toolpath)
     reach = Reach(cell)
     with timer.stage("normals"):
-        toolpath, repaired = repair_normals(toolpath)
-        toolpath, smoothed = smooth_along_paths(toolpath, cell.planning.smooth_length_mm,
-                                                cell.planning.smooth_max_deg)
+        toolpath, repaired, smoothed = directions(toolpath, cell)
     with timer.stage("placement"):
         searched = placement is None
         if placement is None:

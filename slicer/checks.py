@@ -10,6 +10,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from core.tolerance import tol
+from slicer.toolpath.directions import JUMP_DEG
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
 # Share of the layer vertices with H outside the profile above which the job is flagged.
@@ -31,6 +32,22 @@ def _downward_fix(report: Mapping[str, Any]) -> str:
                 "region the layers must also lie on folds them between the two")
     return ("fix: rotate the model so the part grows upward from its largest flat face, or "
             "name that face with --critical")
+
+
+def _jump_note(direction: Mapping[str, Any], printability: Mapping[str, Any] | None) -> str:
+    """The note on printing directions turning fast between neighbouring waypoints, with what
+    the planner's bend test (``printability``, run at slicing time) found."""
+    text = (f"toolpath: {direction['jumps']} neighbouring extruding waypoints turn their "
+            f"printing direction by more than {JUMP_DEG:g} deg (up to "
+            f"{direction['max_jump_deg']:.0f} deg; layers "
+            f"{', '.join(map(str, direction['jump_layers']))}): the nozzle swings there")
+    if printability is None:
+        return text
+    lo, hi = printability["alpha_range_deg"]
+    if not printability.get("refused_waypoints"):
+        return (f"{text}; the planner's bend test keeps alpha in [{lo:g}, {hi:g}] deg at "
+                "every waypoint (the arm may slow there)")
+    return f"{text}; the planner cannot follow some of them (see the plan note)"
 
 
 def critical_line(report: Mapping[str, Any]) -> str | None:
@@ -87,6 +104,11 @@ def job_notes(report: Mapping[str, Any]) -> list[str]:
             f"{direction['max_from_up_deg']:.0f} deg from up; layers "
             f"{', '.join(map(str, direction['downward_layers']))}): no cell can print them; "
             + _downward_fix(report))
+    if direction.get("jumps", 0):
+        notes.append(_jump_note(direction, report.get("printability")))
+    refused = report.get("printability", {}).get("note")
+    if refused:
+        notes.append(f"plan: {refused}")
     for name in ("contour", "stripe"):
         cov = toolpath.get("coverage", {}).get(name, {})
         if cov.get("gap") is not None and (cov["gap"] > COVERAGE_LIMIT[name]

@@ -62,7 +62,6 @@ def run(args: argparse.Namespace) -> int:
     from core.report import update_report
     from core.stages import Toolpath
     from planner.cell import load_cell
-    from planner.other_cells import checked_fix, try_cells
     from planner.plan import plan
     from planner.plan_summary import PlanSummary
     from planner.status import PlanStatus, Refused
@@ -83,10 +82,12 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = plan(toolpath, cell, progress=progress)
     except Refused as exc:
-        # refused before motion: the fix names another bundled cell only if it plans there
-        progress.info(f"refused ({exc.cause}); trying the other bundled cells")
-        raise InputError(exc.problem, checked_fix(try_cells(toolpath, args.cell), exc.fix)) \
-            from exc
+        # refused before motion: the fix names a planning option or another bundled cell
+        # only if the job plans with it
+        progress.info(f"refused ({exc.cause}); trying planning options and the other bundled "
+                      "cells")
+        raise InputError(exc.problem, _checked_fix(job_dir, toolpath, cell, args.cell,
+                                                   exc.cause, exc.fix)) from exc
     result.trajectory.save(job_dir)
     report = dict(result.report)
     if not args.no_figures:
@@ -121,8 +122,10 @@ def run(args: argparse.Namespace) -> int:
     if result.status != PlanStatus.OK:
         # the trajectory is kept for inspection, but a cell would refuse it: say why and what
         # works (another bundled cell, tried here), then fail
-        progress.info(f"not executable ({result.status}); trying the other bundled cells")
-        fix = checked_fix(try_cells(toolpath, args.cell), _fix(result))
+        progress.info(f"not executable ({result.status}); trying planning options and the "
+                      "other bundled cells")
+        fix = _checked_fix(job_dir, toolpath, cell, args.cell, result.cause or result.status,
+                           _fix(result))
         print(f"mesp: error: the plan cannot be executed ({result.status}): {result.message}; "
               f"{fix}", file=sys.stderr)
         return 3
@@ -175,6 +178,30 @@ def _video(job_dir: Path, cell: Any, result: Any, toolpath: Any, speedup: float,
             "frames": video.frames, "speedup": speedup, "size_px": [video.width, video.height],
             "low_clearance_mm": max(5.0, 2 * required), "render_s": round(video.render_s, 2),
             "render_s_per_print_min": round(video.render_s_per_print_min, 3)}
+
+
+def _checked_fix(job_dir: Path, toolpath: Any, cell: Any, cell_path: Path | None, why: Any,
+                 fallback: str) -> str:
+    """The fix of a refused job: a planning option the planner re-planned with, written into
+    DIR/cell_checked.toml (the user's cell plus the option), else another bundled cell that
+    plans it, else ``fallback`` with what was tried (``planner.option_retry``,
+    ``planner.other_cells``)."""
+    import tomli_w
+
+    from core.configtools import read_toml
+    from planner.option_retry import as_cell, retry
+    from planner.other_cells import checked_fix, shown, try_cells
+
+    found = retry(toolpath, cell, why)
+    if found.option is not None:
+        path = job_dir / "cell_checked.toml"
+        user = read_toml(cell_path) if cell_path is not None else {}
+        path.write_text(tomli_w.dumps(as_cell(user, found.option)))
+        settings = ", ".join(f"{k} = {v:g}" for k, v in found.option.items())
+        return (f"plan with --cell {shown(path)} (the cell you planned with, plus [planning] "
+                f"{settings}; checked: the job plans ok with it)")
+    fix = checked_fix(try_cells(toolpath, cell_path), fallback)
+    return fix + (f"; planning options tried: {'; '.join(found.tried)}" if found.tried else "")
 
 
 def _fix(result: Any) -> str:

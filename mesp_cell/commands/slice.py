@@ -116,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
     progress.info(f"slicing {args.model} -> {args.out}")
     from planner.cell import load_cell
 
-    alpha = load_cell(args.cell).planning.alpha_range
+    cell = load_cell(args.cell)
+    alpha = cell.planning.alpha_range
     try:
         report = slice_model(args.model, args.out, job, progress=progress, until=args.until,
                              alpha=alpha, repair=args.repair)
@@ -131,6 +132,14 @@ def run(args: argparse.Namespace) -> int:
     line = critical_line(report)
     if line is not None:
         progress.info(line)
+    if args.until in (None, "toolpath") and (args.out / "toolpath.npz").is_file():
+        # what the planner will refuse in any placement, known from the toolpath alone
+        from core.report import update_report
+        from core.stages import Toolpath
+        from planner.printability import check
+
+        section, _ = check(Toolpath.load(args.out), cell)
+        report = update_report(args.out, {"printability": section})
     for note in job_notes(report):  # even with --quiet: they may need acting on
         print(f"note: {note}", flush=True)
     return 0

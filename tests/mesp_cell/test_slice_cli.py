@@ -86,6 +86,9 @@ def test_slice_writes_every_stage_and_design_report_keys(cube_job: Path) -> None
     recorded = load_job_profile(cube_job)
     assert report["toolpath"]["profile"]["sha256"] == recorded.sha256
     assert report["toolpath"]["bend_relief"]["limit_deg"] == 20.0  # the bundled cell's range
+    # the planner's bend test, run at slicing time on the toolpath: nothing it would refuse
+    assert report["printability"]["refused_waypoints"] == 0
+    assert report["printability"]["alpha_range_deg"] == [70.0, 110.0]
 
 
 def test_slice_writes_exports_and_pictures(cube_job: Path) -> None:

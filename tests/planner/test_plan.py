@@ -148,6 +148,9 @@ def test_a_path_bending_up_out_of_its_layer_is_refused_with_a_fix(
     assert "waypoint 20 (layer 0, at 10.0, 0.0, 5.0 mm)" in err[0]
     assert "bends against its layer" in err[0] and "re-slice" in err[0]
     assert "tried tray: refused (bend)" in err[0]
+    # the bent waypoints are left out of the search: the rest is reachable, and said so
+    assert "(the rest is reachable: " in err[0] and "besides" not in err[0]
+    assert "planning options tried: lean_max_deg = 60: 3 waypoints still bent" in err[0]
     found = bends(tp, cell)
     assert list(found.waypoint) == [20, 21, 22]
     half = float(np.ceil(found.needed_deg.max()))

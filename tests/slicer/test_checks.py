@@ -87,3 +87,19 @@ def test_too_much_ink_at_the_narrowest_width_names_thin_walls() -> None:
     wide = _report(volume_error=0.05, width_over_profile={"min": 0.8})
     (note,) = job_notes(wide)
     assert "see toolpath.per_layer" in note
+
+
+def test_direction_jumps_get_a_note_with_what_the_planners_bend_test_found() -> None:
+    jumps = {"downward": 0, "jumps": 7, "max_jump_deg": 48.2, "jump_layers": [3, 9]}
+    (note,) = job_notes(_report(printing_direction=jumps))
+    assert "7 neighbouring extruding waypoints turn" in note and "up to 48 deg" in note
+    assert "layers 3, 9" in note
+    report = _report(printing_direction=jumps)
+    report["printability"] = {"alpha_range_deg": [70.0, 110.0], "refused_waypoints": 0}
+    (note,) = job_notes(report)
+    assert "keeps alpha in [70, 110] deg at every waypoint" in note
+    report["printability"] = {"alpha_range_deg": [70.0, 110.0], "refused_waypoints": 3,
+                              "note": "3 waypoints cannot be printed ...; fix: re-slice"}
+    jump, plan = job_notes(report)
+    assert "cannot follow some of them (see the plan note)" in jump
+    assert plan == "plan: 3 waypoints cannot be printed ...; fix: re-slice"
