@@ -21,6 +21,7 @@ from core.status import JobState
 from mesp_cell.drivers.stream import StreamPlan
 from mesp_cell.messages import FAULT_ESTOP, ExtruderState, JobProgress, RobotState
 from mesp_cell.planned_ink import planned_ink
+from planner.plan_summary import PlanSummary
 
 FAULT_NAMES = {1 << 0: "watchdog", 1 << 1: "stall", 1 << 2: "overload", 1 << 3: "e-stop",
                1 << 8: "link"}
@@ -50,10 +51,11 @@ def load_job_plan(job_id: str, job_dir: Path, dt: float) -> JobPlan:
     report = job_dir / "report.json"
     if report.is_file():
         try:
-            plan = json.loads(report.read_text()).get("plan", {})
-            duration = float(plan.get("duration_s", 0.0) or 0.0)
-            clearance = float(plan.get("min_clearance_mm", float("nan")))
-        except (OSError, ValueError, TypeError):
+            summary = PlanSummary.of(json.loads(report.read_text()).get("plan", {}))
+            duration = summary.duration_s if np.isfinite(summary.duration_s) else 0.0
+            if summary.min_clearance_mm is not None:
+                clearance = summary.min_clearance_mm
+        except (OSError, ValueError, TypeError, AttributeError):
             pass
     stream = None
     traj = job_dir / "trajectory.npz"
