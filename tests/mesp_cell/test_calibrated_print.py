@@ -1,7 +1,8 @@
 """Recalibrate the emulated extruder at another true rate, then print on the twin.
 
-The whole cell runs (real processes, the real slicer and planner on the cube example, the
-emulated Modbus extruder whose true rate is ``GAIN`` x its set-point). After `mesp calibrate
+The whole cell runs (real processes, the real slicer and planner on a ``CUBE_MM`` cube with the
+cube example's job file, the emulated Modbus extruder whose true rate is ``GAIN`` x its
+set-point). After `mesp calibrate
 extrusion --activate`, a job sliced with the old profile is refused before it is planned or
 moves, and a job sliced with the new profile extrudes the toolpath's volume within 1 %, by the
 emulator's hidden truth (not by the totaliser, which believes the set-point).
@@ -17,10 +18,14 @@ from pathlib import Path
 import pytest
 
 from mesp_cell.cli import main
+from tests.mesp_cell import synthetic
 
 ROOT = Path(__file__).resolve().parents[2]
 GAIN = 1.08  # the emulated extruder delivers 8 % more than it is asked
 TIME_SCALE = 40.0
+#: mm, the cube's edge: the example's 20 mm cube prints for 21 simulated minutes; this one
+#: has about as many paths (starts and stops, where a rate error shows) in a third of the volume
+CUBE_MM = 14.0
 
 
 def _truth(home: Path) -> float:
@@ -53,16 +58,21 @@ def test_recalibrated_cell_refuses_a_stale_job_and_prints_the_toolpath_volume(
           f"{new.rate_mm3_s / true_rate - 1:+.3%}")
     assert new.name == "lab-2026" and new.calibrated
     assert new.rate_mm3_s == pytest.approx(true_rate, rel=0.01)
-    job = (ROOT / "examples" / "cube.toml").read_text()
+    # the cube example's job, without the width baselines (a third of the toolpath's work,
+    # measured for the report only: nothing printed depends on them)
+    job = ((ROOT / "examples" / "cube.toml").read_text()
+           + "\n[toolpath]\nmeasure_baselines = false\n")
+    fresh_job = tmp_path / "fresh.toml"
+    fresh_job.write_text(job)
     stale_job = tmp_path / "stale.toml"
     stale_job.write_text(job + f'\n[extrusion]\nprofile = "{FACTORY}"\n')
-    cube = ROOT / "examples" / "cube.stl"
+    cube = synthetic.write_cube(tmp_path / "cube.stl", CUBE_MM)
     with start_cell(overrides={"time_scale": TIME_SCALE, "true_gain": GAIN,
                                "prime_s": 0.5}) as cell:
         client = cell.client()
         try:
             stale = client.submit(cube, stale_job)
-            fresh = client.submit(cube, ROOT / "examples" / "cube.toml")
+            fresh = client.submit(cube, fresh_job)
             refused = client.wait(stale.id, timeout=240)
             before = _truth(home)
             client.confirm_ready(fresh.id, timeout=240)  # the operator confirms the tank
