@@ -29,12 +29,16 @@ CUBE_MM = 14.0
 
 
 def _truth(home: Path) -> float:
-    """The emulator's hidden delivered volume, mm^3 (its --truth file)."""
+    """The emulator's hidden delivered volume now, mm^3: the first of its --truth files
+    (written every 0.2 s) written after this call."""
     path = home / "run" / "sim.extruder-truth.json"
-    end = time.monotonic() + 10.0
-    while not path.is_file() and time.monotonic() < end:
-        time.sleep(0.1)
-    return float(json.loads(path.read_text())["true_volume_mm3"])
+    now = time.time()
+    end = time.monotonic() + 30.0
+    while time.monotonic() < end:
+        if path.is_file() and path.stat().st_mtime > now:
+            return float(json.loads(path.read_text())["true_volume_mm3"])
+        time.sleep(0.05)
+    raise AssertionError(f"the extruder emulator wrote no {path.name} for 30 s")
 
 
 @pytest.mark.timeout(600)
@@ -83,7 +87,6 @@ def test_recalibrated_cell_refuses_a_stale_job_and_prints_the_toolpath_volume(
                 print(f"resumed after: {done.reason}")
                 client.resume(fresh.id)
                 done = client.wait(fresh.id, timeout=400)
-            time.sleep(0.5)  # the emulator writes its truth every 0.2 s
             after = _truth(home)
         finally:
             client.close()
