@@ -41,6 +41,7 @@ def _truth(home: Path) -> float:
     raise AssertionError(f"the extruder emulator wrote no {path.name} for 30 s")
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_recalibrated_cell_refuses_a_stale_job_and_prints_the_toolpath_volume(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,

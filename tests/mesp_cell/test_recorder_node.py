@@ -42,6 +42,7 @@ def _state_times(path: Path) -> tuple[float, float]:
     return min(times) / 1e9, max(times) / 1e9
 
 
+@pytest.mark.slow
 def test_twin_print_records_the_published_states(tmp_path: Path,
                                                   monkeypatch: pytest.MonkeyPatch,
                                                   capsys: pytest.CaptureFixture[str]) -> None:

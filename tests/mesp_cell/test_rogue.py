@@ -42,6 +42,8 @@ from planner.collision import CollisionModel
 from tests.mesp_cell import synthetic
 from tests.mesp_cell.conftest import plan_at_home
 
+pytestmark = pytest.mark.slow  # a cell and three prints
+
 
 class Watch:
     """The latest robot and extruder states as the operator sees them."""
