@@ -56,7 +56,7 @@ def test_twin_print_records_the_published_states(tmp_path: Path,
         [sys.executable, "-m", "mesp_cell.cli", "launch", "sim", "--set", "robot_backend=twin",
          "--set", "slice_fn=tests.mesp_cell.synthetic:slice_job",
          "--set", "plan_fn=tests.mesp_cell.synthetic:plan_job", "--set", "prime_s=0.1",
-         "--set", "record_hz=0"],
+         "--set", "record_hz=0", "--set", "time_scale=4"],  # 4x: the moves last 1.4 s, not 5.6
         env={**os.environ}, stdout=subprocess.DEVNULL, stderr=err)
     try:
         _wait(lambda: (tmp_path / "run" / "sim.json").is_file(), 60.0, "no run file")
