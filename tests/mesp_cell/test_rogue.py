@@ -42,7 +42,7 @@ from planner.collision import CollisionModel
 from tests.mesp_cell import synthetic
 from tests.mesp_cell.conftest import plan_at_home
 
-pytestmark = pytest.mark.slow  # a cell and three prints
+pytestmark = pytest.mark.slow  # a cell and two prints
 
 
 class Watch:
