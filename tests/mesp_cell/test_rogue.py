@@ -97,6 +97,7 @@ def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Launch]:
     launch_file = home / "sim.toml"
     launch_file.write_text(bundled_launch("sim").read_text().replace(
         "[process.params.servo]\n", "[process.params.servo]\noverrun_s = 1.0\n", 1))
+    assert "overrun_s = 1.0" in launch_file.read_text()
     old = os.environ.get("MESP_HOME")
     os.environ["MESP_HOME"] = str(home)
     try:  # the cell's processes take their home from the environment when they start
