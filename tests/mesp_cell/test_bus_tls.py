@@ -94,13 +94,16 @@ def hub(pki: dict[str, Path]) -> Iterator[tuple[Bus, str]]:
 
 
 def peer(pki: dict[str, Path], who: str, ep: str, name: str) -> Bus:
-    bus = Bus(BusConfig(cell="t", listen=("tls/127.0.0.1:0",), connect=(ep,),
-                        tls_dir=str(pki[who])), name, Role.OPERATOR, KEY)
-    time.sleep(1.0)  # handshake and mesh
-    return bus
+    """A session on ``ep`` with ``who``'s certificate (it connects in the background: a test
+    waits for what it needs, ``wait_served`` or ``wait_subscribed``)."""
+    return Bus(BusConfig(cell="t", listen=("tls/127.0.0.1:0",), connect=(ep,),
+                         tls_dir=str(pki[who])), name, Role.OPERATOR, KEY)
 
 
-def beats_heard(listener: Bus, sender: Bus, n: int = 5) -> int:
+def beats_heard(listener: Bus, sender: Bus, n: int = 5, patience: float = 10.0) -> int:
+    """How many of ``n`` heartbeats ``sender`` publishes ``listener`` hears. The sender waits
+    for the subscription to reach it, then the beats are waited for, each wait ``patience`` s
+    at most (a short one where nothing should arrive: those beats go out after it anyway)."""
     got: list[Heartbeat] = []
     lock = threading.Lock()
 
@@ -109,11 +112,15 @@ def beats_heard(listener: Bus, sender: Bus, n: int = 5) -> int:
             got.append(m)
 
     listener.subscribe(sender.node, "heartbeat", Heartbeat, on)
-    time.sleep(0.5)
+    sender.wait_subscribed("heartbeat", timeout=patience)
     for i in range(n):
         sender.publish("heartbeat", Heartbeat(sender.node, "active", i, 1, time.time()))
-        time.sleep(0.05)
-    time.sleep(0.5)
+    end = time.monotonic() + patience
+    while time.monotonic() < end:
+        with lock:
+            if len(got) >= n:
+                break
+        time.sleep(0.02)
     with lock:
         return len(got)
 
@@ -123,6 +130,7 @@ def test_a_peer_with_the_cells_certificate_talks(pki: dict[str, Path],
     alpha, ep = hub
     node = peer(pki, "node", ep, "beta")
     try:
+        assert node.wait_served("alpha", timeout=10.0)
         assert node.request("alpha", Command.make("ping"), 5.0).value("echo") == "ping"
         assert beats_heard(alpha, node) == 5
         assert beats_heard(node, alpha) == 5
@@ -135,15 +143,16 @@ def test_a_peer_of_another_authority_hears_nothing(pki: dict[str, Path],
     alpha, ep = hub
     stranger = peer(pki, "stranger", ep, "beta")
     try:
+        assert not stranger.wait_served("alpha", timeout=1.0)  # time to try the handshake
         r = stranger.request("alpha", Command.make("ping"), 2.0)
         assert not r.ok and "no reply" in r.reason
-        assert beats_heard(stranger, alpha) == 0
+        assert beats_heard(stranger, alpha, patience=1.0) == 0
     finally:
         stranger.close()
     plain = Bus(BusConfig(cell="t", connect=(ep.replace("tls/", "tcp/"),)), "gamma",
                 Role.OPERATOR, KEY)
     try:
-        time.sleep(0.5)
+        assert not plain.wait_served("alpha", timeout=1.0)
         r = plain.request("alpha", Command.make("ping"), 2.0)
         assert not r.ok and "no reply" in r.reason
     finally:
@@ -156,7 +165,7 @@ def test_access_control_makes_a_viewer_read_only(pki: dict[str, Path],
     viewer = peer(pki, "viewer", ep, "viewer")
     try:
         assert beats_heard(viewer, alpha) == 5  # it may listen
-        assert beats_heard(alpha, viewer) == 0  # it may not publish
+        assert beats_heard(alpha, viewer, patience=1.0) == 0  # it may not publish
         r = viewer.request("alpha", Command.make("ping"), 2.0)  # nor command
         assert not r.ok and "no reply" in r.reason
     finally:

@@ -1,7 +1,8 @@
 """Recalibrate the emulated extruder at another true rate, then print on the twin.
 
-The whole cell runs (real processes, the real slicer and planner on the cube example, the
-emulated Modbus extruder whose true rate is ``GAIN`` x its set-point). After `mesp calibrate
+The whole cell runs (real processes, the real slicer and planner on a ``CUBE_MM`` cube with the
+cube example's job file, the emulated Modbus extruder whose true rate is ``GAIN`` x its
+set-point). After `mesp calibrate
 extrusion --activate`, a job sliced with the old profile is refused before it is planned or
 moves, and a job sliced with the new profile extrudes the toolpath's volume within 1 %, by the
 emulator's hidden truth (not by the totaliser, which believes the set-point).
@@ -17,21 +18,30 @@ from pathlib import Path
 import pytest
 
 from mesp_cell.cli import main
+from tests.mesp_cell import synthetic
 
 ROOT = Path(__file__).resolve().parents[2]
 GAIN = 1.08  # the emulated extruder delivers 8 % more than it is asked
 TIME_SCALE = 40.0
+#: mm, the cube's edge: the example's 20 mm cube prints for 21 simulated minutes; this one
+#: has about as many paths (starts and stops, where a rate error shows) in a third of the volume
+CUBE_MM = 14.0
 
 
 def _truth(home: Path) -> float:
-    """The emulator's hidden delivered volume, mm^3 (its --truth file)."""
+    """The emulator's hidden delivered volume now, mm^3: the first of its --truth files
+    (written every 0.2 s) written after this call."""
     path = home / "run" / "sim.extruder-truth.json"
-    end = time.monotonic() + 10.0
-    while not path.is_file() and time.monotonic() < end:
-        time.sleep(0.1)
-    return float(json.loads(path.read_text())["true_volume_mm3"])
+    now = time.time()
+    end = time.monotonic() + 30.0
+    while time.monotonic() < end:
+        if path.is_file() and path.stat().st_mtime > now:
+            return float(json.loads(path.read_text())["true_volume_mm3"])
+        time.sleep(0.05)
+    raise AssertionError(f"the extruder emulator wrote no {path.name} for 30 s")
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_recalibrated_cell_refuses_a_stale_job_and_prints_the_toolpath_volume(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
@@ -53,16 +63,21 @@ def test_recalibrated_cell_refuses_a_stale_job_and_prints_the_toolpath_volume(
           f"{new.rate_mm3_s / true_rate - 1:+.3%}")
     assert new.name == "lab-2026" and new.calibrated
     assert new.rate_mm3_s == pytest.approx(true_rate, rel=0.01)
-    job = (ROOT / "examples" / "cube.toml").read_text()
+    # the cube example's job, without the width baselines (a third of the toolpath's work,
+    # measured for the report only: nothing printed depends on them)
+    job = ((ROOT / "examples" / "cube.toml").read_text()
+           + "\n[toolpath]\nmeasure_baselines = false\n")
+    fresh_job = tmp_path / "fresh.toml"
+    fresh_job.write_text(job)
     stale_job = tmp_path / "stale.toml"
     stale_job.write_text(job + f'\n[extrusion]\nprofile = "{FACTORY}"\n')
-    cube = ROOT / "examples" / "cube.stl"
+    cube = synthetic.write_cube(tmp_path / "cube.stl", CUBE_MM)
     with start_cell(overrides={"time_scale": TIME_SCALE, "true_gain": GAIN,
                                "prime_s": 0.5}) as cell:
         client = cell.client()
         try:
             stale = client.submit(cube, stale_job)
-            fresh = client.submit(cube, ROOT / "examples" / "cube.toml")
+            fresh = client.submit(cube, fresh_job)
             refused = client.wait(stale.id, timeout=240)
             before = _truth(home)
             client.confirm_ready(fresh.id, timeout=240)  # the operator confirms the tank
@@ -73,7 +88,6 @@ def test_recalibrated_cell_refuses_a_stale_job_and_prints_the_toolpath_volume(
                 print(f"resumed after: {done.reason}")
                 client.resume(fresh.id)
                 done = client.wait(fresh.id, timeout=400)
-            time.sleep(0.5)  # the emulator writes its truth every 0.2 s
             after = _truth(home)
         finally:
             client.close()

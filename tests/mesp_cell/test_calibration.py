@@ -110,6 +110,7 @@ def _calibrate(gain: float, seed: int, scale_noise: ScaleNoise | None = None) ->
     return fit_rate(seconds, masses, DENSITY, SETPOINT).C
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(180)
 def test_calibration_recovers_the_hidden_rate_within_1_percent_over_5_runs() -> None:
     gain = 1.13

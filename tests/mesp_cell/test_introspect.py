@@ -77,6 +77,7 @@ def cell(tmp_path_factory: pytest.TempPathFactory):  # type: ignore[no-untyped-d
             os.environ["MESP_HOME"] = old
 
 
+@pytest.mark.slow  # the cell's start
 def test_node_list_shows_every_node_with_state_pid_and_heartbeat(
         cell: subprocess.Popen[bytes], capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["node", "list"]) == 0

@@ -2,8 +2,9 @@
 session that does not hold the cell's secret (and some from one that does but may not), is
 refused, and the refusal is logged by the node that refused it.
 
-One simulated cell (synthetic slicing/planning) serves the module; the forged supervisor
-presence runs last (it kills the supervisor)."""
+One simulated cell (synthetic slicing, a synthetic trajectory from the cell's home, so no
+approach move) serves the module; the forged supervisor presence runs last (it kills the
+supervisor)."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -24,7 +26,8 @@ from mesp_cell.bus.presence import TIMEOUT_S
 from mesp_cell.bus.session import Bus, BusConfig
 from mesp_cell.bus.signing import Role
 from mesp_cell.jobs import JobStore
-from mesp_cell.launcher import CellClient, Launch
+from mesp_cell.launch_file import bundled_launch
+from mesp_cell.launcher import CellClient, Launch, start_cell
 from mesp_cell.messages import (
     FAULT_STALL,
     Command,
@@ -37,6 +40,9 @@ from mesp_cell.messages import (
 from planner.cell import load_cell
 from planner.collision import CollisionModel
 from tests.mesp_cell import synthetic
+from tests.mesp_cell.conftest import plan_at_home
+
+pytestmark = pytest.mark.slow  # a cell and two prints
 
 
 class Watch:
@@ -65,11 +71,46 @@ class Watch:
         return np.asarray(self.robot.q)
 
 
+#: a model named so gets a trajectory this many times slower (``plan_by_name``)
+SLOW_MODEL, SLOW_FACTOR = "long", 4.0
+
+
+def plan_by_name(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
+    """``plan_at_home``; for a model named ``SLOW_MODEL*``, the same motion ``SLOW_FACTOR`` x
+    slower: a print that outlasts a supervisor's restart on a loaded host."""
+    out = plan_at_home(job_dir, cell_file)
+    if Path(job_dir).name.startswith(SLOW_MODEL):
+        path = Path(job_dir) / "trajectory.npz"
+        arrays = dict(np.load(path))
+        arrays["t"] = arrays["t"] * SLOW_FACTOR
+        arrays["qd"] = arrays["qd"] / SLOW_FACTOR
+        save_npz(path, arrays)
+    return out
+
+
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Launch]:
-    # the kinematic twin at 0.2x: a print lasts ~9 s, longer than a forged presence holds
-    with synthetic.cell_in_home(tmp_path_factory.mktemp("mesp_home"), robot_backend="twin",
-                                time_scale=0.2) as launch:
+    # the kinematic twin at 0.2x: a print lasts ~9 s (a slow model's ~35 s), time for forged
+    # messages to land during it; a servo overrun watchdog that a loaded 2-core host does not
+    # trip (the interlocks are test_safety's subject, not the bus's)
+    home = tmp_path_factory.mktemp("mesp_home")
+    launch_file = home / "sim.toml"
+    launch_file.write_text(bundled_launch("sim").read_text().replace(
+        "[process.params.servo]\n", "[process.params.servo]\noverrun_s = 1.0\n", 1))
+    assert "overrun_s = 1.0" in launch_file.read_text()
+    old = os.environ.get("MESP_HOME")
+    os.environ["MESP_HOME"] = str(home)
+    try:  # the cell's processes take their home from the environment when they start
+        launch = start_cell(launch_file, overrides={
+            "slice_fn": "tests.mesp_cell.synthetic:slice_job",
+            "plan_fn": "tests.mesp_cell.test_rogue:plan_by_name", "prime_s": 0.1,
+            "robot_backend": "twin", "time_scale": 0.2})
+    finally:
+        if old is None:
+            os.environ.pop("MESP_HOME", None)
+        else:
+            os.environ["MESP_HOME"] = old
+    with launch:
         yield launch
 
 
@@ -86,8 +127,10 @@ def watch(client: CellClient) -> Watch:
 
 
 def session(cell: Launch, name: str, secret: bytes | None, role: Role = Role.OPERATOR) -> Bus:
+    """A session on the cell's bus, once it reaches the nodes it talks to."""
     bus = Bus(BusConfig(cell=cell.spec.cell, connect=(cell.spec.hub,)), name, role, secret)
-    time.sleep(0.4)  # mesh with the peers
+    for node in ("robot", "extruder", "supervisor"):
+        assert bus.wait_served(node, timeout=30.0), f"{name} never reached the {node}"
     return bus
 
 
@@ -177,7 +220,10 @@ def test_a_stream_far_from_the_arm_and_a_colliding_trajectory_are_refused(
 
 def test_estop_reset_needs_the_operator(cell: Launch, client: CellClient, rogue: Bus) -> None:
     client.estop("rogue test")
-    time.sleep(0.5)
+    end = time.monotonic() + 10
+    while time.monotonic() < end and not client.bus().request(
+            "robot", Command.make("status"), 3.0).value("estopped"):
+        time.sleep(0.05)
     for node in ("robot", "extruder"):
         r = rogue.request(node, Command.make("reset"), 3.0)
         assert refused(r.reason, r.ok), r
@@ -291,7 +337,7 @@ def test_forged_supervisor_presence_does_not_keep_a_print_running(
     fake.announce()  # its liveliness token, as the real one's
     fake.publish("heartbeat", Heartbeat("supervisor", "active", 1, 1, time.time()))
     try:
-        model = synthetic.write_cube(tmp_path / "cube.stl")
+        model = synthetic.write_cube(tmp_path / f"{SLOW_MODEL}.stl")
         job = client.submit(model)
         client.confirm_ready(job.id)
         end = time.monotonic() + 60

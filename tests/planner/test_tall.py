@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from core.stages import Toolpath
 from planner.cell import CellConfig, load_cell
@@ -125,6 +126,7 @@ def _steep_edge(slope_deg: float) -> Toolpath:
     return make_toolpath(np.concatenate(pos), np.concatenate(nrm), np.concatenate(path))
 
 
+@pytest.mark.slow  # the deep tank's refusal re-plans at every other placement
 def test_the_tray_cell_takes_a_steep_edge_the_deep_tank_refuses(cell: CellConfig) -> None:
     tray = load_cell(Path(__file__).resolve().parents[2] / "planner" / "cells" / "tray.toml")
     # only the tank differs: the same arm, tool and limits

@@ -1,8 +1,9 @@
 """Issue 2 acceptance on the shipped examples, at a coarse mesh.
 
 The socket (rim critical, ``top:45``) and the aorta arch (``bottom:30``: two tube ends and the
-downward-facing strips of the arch) are tetrahedralised at 6 mm (fTetWild, 2 optimisation
-passes; 8 mm leaves the aorta's thin arch wall with flat, disconnected slivers) and sliced with
+downward-facing strips of the arch) are tetrahedralised at 6 mm (fTetWild, 1 optimisation
+pass where a job runs 10: a rougher mesh, on which the criteria still hold by a wide margin;
+8 mm leaves the aorta's thin arch wall with flat, disconnected slivers) and sliced with
 their job files' critical selectors. The criteria: final layer-height std at most 30 % of the
 initial (the scalar harmonic G0) and coefficient of variation at most 0.20; every critical
 region lies on one layer.
@@ -22,7 +23,7 @@ from slicer.tetrahedralize import tetrahedralize
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 EDGE_MM = 6.0
-OPTIMIZE_ITERATIONS = 2
+OPTIMIZE_ITERATIONS = 1
 
 pytestmark = pytest.mark.slow
 
