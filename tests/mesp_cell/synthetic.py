@@ -160,7 +160,10 @@ def cell_in_home(home: Path, **overrides: Any) -> Iterator[Launch]:
 
     old = os.environ.get("MESP_HOME")
     os.environ["MESP_HOME"] = str(home)
-    launch = start_cell(overrides={"slice_fn": "tests.mesp_cell.synthetic:slice_job",
+    # a servo overrun watchdog that a loaded 2-core test host does not trip (a stall that
+    # interrupts a print is not what these tests inject)
+    launch = start_cell(overrides={"servo_overrun_s": 1.0,
+                                   "slice_fn": "tests.mesp_cell.synthetic:slice_job",
                                    "plan_fn": "tests.mesp_cell.synthetic:plan_job",
                                    "prime_s": 0.1, **overrides})
     try:

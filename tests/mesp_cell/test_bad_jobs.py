@@ -19,6 +19,8 @@ from mesp_cell.cell_client import CellClient
 from mesp_cell.launcher import Launch
 from tests.mesp_cell import synthetic
 
+pytestmark = pytest.mark.slow  # a cell and bad jobs through it
+
 FAST_S = 30.0  # a failing job fails within this (the old wait was 3600 s)
 
 

@@ -27,6 +27,8 @@ from mesp_cell.nodes.print_check import VOLUME_TOLERANCE
 from slicer.extrusion import ACTIVE, load_profile
 from tests.mesp_cell import synthetic
 
+pytestmark = pytest.mark.slow  # the demo end to end
+
 HOME = np.radians([0.0, -100.0, 100.0, -90.0, -90.0, 0.0])
 PATHS = 40          # deposition paths
 PER_PATH = 8        # waypoints per path

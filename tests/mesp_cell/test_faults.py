@@ -16,6 +16,8 @@ import pytest
 from bench.faults import Campaign, Run
 from tests.mesp_cell import synthetic
 
+pytestmark = pytest.mark.slow  # faults injected into a printing cell
+
 LIMIT_S = 0.1  # the targets: the arm stops, and the screw is commanded to zero
 
 

@@ -94,15 +94,11 @@ def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Launch]:
     # messages to land during it; a servo overrun watchdog that a loaded 2-core host does not
     # trip (the interlocks are test_safety's subject, not the bus's)
     home = tmp_path_factory.mktemp("mesp_home")
-    launch_file = home / "sim.toml"
-    launch_file.write_text(bundled_launch("sim").read_text().replace(
-        "[process.params.servo]\n", "[process.params.servo]\noverrun_s = 1.0\n", 1))
-    assert "overrun_s = 1.0" in launch_file.read_text()
     old = os.environ.get("MESP_HOME")
     os.environ["MESP_HOME"] = str(home)
     try:  # the cell's processes take their home from the environment when they start
-        launch = start_cell(launch_file, overrides={
-            "slice_fn": "tests.mesp_cell.synthetic:slice_job",
+        launch = start_cell(bundled_launch("sim"), overrides={
+            "servo_overrun_s": 1.0, "slice_fn": "tests.mesp_cell.synthetic:slice_job",
             "plan_fn": "tests.mesp_cell.test_rogue:plan_by_name", "prime_s": 0.1,
             "robot_backend": "twin", "time_scale": 0.2})
     finally:

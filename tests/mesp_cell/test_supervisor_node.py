@@ -18,6 +18,8 @@ from mesp_cell.nodes.eta_estimate import EtaEstimate
 from planner.cell import load_cell
 from tests.mesp_cell.conftest import Console
 
+pytestmark = pytest.mark.slow  # nodes on the bus
+
 
 def test_eta_follows_the_measured_pace_not_the_asked_one() -> None:
     # asked: 80x at 2 ms = 40,000 samples/s; kept: 32,000 (a lagging twin)

@@ -15,6 +15,8 @@ from websockets.sync.client import connect
 from sim.render import GL_PROBLEM
 from tests.mesp_cell.conftest import Console
 
+pytestmark = pytest.mark.slow  # a cell behind the console
+
 
 class LiveRecorder:
     """Reads the console's WebSocket on a thread: live messages with their arrival time."""

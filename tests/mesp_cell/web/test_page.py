@@ -16,6 +16,8 @@ import pytest
 from sim.render import GL_PROBLEM
 from tests.mesp_cell.conftest import Console
 
+pytestmark = pytest.mark.slow  # a cell and a browser
+
 CUBE = Path(__file__).resolve().parents[3] / "examples" / "cube.stl"
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 DRIVER = shutil.which("chromedriver") or "/usr/bin/chromedriver"
