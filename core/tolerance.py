@@ -30,6 +30,16 @@ class Tolerance:
         computed: float, relative (or mm) accuracy of a value computed by a factorisation or
             an iteration: a probe solve, a clearance or a recurrence's end point within this
             of its target agrees with it.
+        singular: float, a sine below this is a singular configuration (the UR wrist at 0 or
+            180 deg): the angle that would be divided by it is taken as 0.
+        direction: float, a vector shorter than this has no direction; normalising it
+            divides by 1 instead.
+        parallel: float, a cross product shorter than this, relative to the vectors'
+            lengths, makes two directions parallel.
+        edge_on: float, mm^2, twice a triangle's projected area below this: the triangle is
+            seen edge-on (a ray grazes it).
+        on_surface: float, relative to the part's size, a point within this of a face lies
+            on it.
     """
 
     zero: float = 1e-12
@@ -42,6 +52,11 @@ class Tolerance:
     still: float = 1e-6
     computed: float = 1e-6
     tiny: float = 1e-300
+    singular: float = 1e-10
+    direction: float = 1e-15
+    parallel: float = 1e-6
+    edge_on: float = 1e-14
+    on_surface: float = 1e-7
 
 
 tol = Tolerance()

@@ -196,10 +196,10 @@ def ik(flange: np.ndarray, branches: tuple[int, ...] = tuple(range(BRANCHES))) -
     ok = ok[..., None] & (np.abs(c5) <= 1.0 + tol.slack)
     q5 = wrist * np.arccos(np.clip(c5, -1.0, 1.0))
     s5 = np.sin(q5)
-    s5_safe = np.where(np.abs(s5) < 1e-10, 1.0, s5)
+    s5_safe = np.where(np.abs(s5) < tol.singular, 1.0, s5)
     y = (-R[..., None, 0, 1] * s1 + R[..., None, 1, 1] * c1) / s5_safe
     x = (R[..., None, 0, 0] * s1 - R[..., None, 1, 0] * c1) / s5_safe
-    q6 = np.where(np.abs(s5) < 1e-10, 0.0, np.arctan2(y, x))
+    q6 = np.where(np.abs(s5) < tol.singular, 0.0, np.arctan2(y, x))
 
     # planar 3R problem for q2, q3, q4
     T14 = (

@@ -147,10 +147,11 @@ def _null_vector(J: np.ndarray, a: np.ndarray, lam2: np.ndarray) -> np.ndarray:
     A6 = J @ np.swapaxes(J, 1, 2) + lam2[:, None, None] * np.eye(6)
     n = np.einsum("mji,mj->mi", J, np.linalg.solve(A6, rhs[..., None])[..., 0])
     norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return n / np.where(norm > 1e-15, norm, 1.0)
+    return n / np.where(norm > tol.direction, norm, 1.0)
 
 
 MIN_DT = 1e-6  # s, shortest step of the time law
+MIN_ACC = 1e-6  # rad/s^2, the acceleration a step between two rests is given at least
 
 
 # The joint path's curvature q'' is taken over +-this arc length, not between neighbouring
@@ -256,7 +257,7 @@ def time_law(
         # a step between two rests: from rest to rest with the acceleration budget
         both = (sd[:-1] + sd[1:]) < tol.floor
         if both.any():
-            acc_s = np.maximum(np.minimum(budget[:-1], budget[1:])[both], 1e-6)
+            acc_s = np.maximum(np.minimum(budget[:-1], budget[1:])[both], MIN_ACC)
             dt[both] = np.maximum(2.0 * np.sqrt(ds[both] / acc_s), MIN_DT)
         qd = dq * sd[:, None]
         acc = np.abs(np.diff(qd, axis=0)) / dt[:, None]

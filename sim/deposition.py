@@ -233,7 +233,7 @@ def extrusion_segments(toolpath: Toolpath, morphology: Morphology,
     normal = toolpath.normal[i] + toolpath.normal[i + 1]
     lateral = np.cross(tangent, normal)
     norm = np.linalg.norm(lateral, axis=1)
-    bad = norm < 1e-6 * np.maximum(np.linalg.norm(normal, axis=1), 1.0)
+    bad = norm < tol.parallel * np.maximum(np.linalg.norm(normal, axis=1), 1.0)
     if np.any(bad):
         # Moving along the nozzle axis: any direction across the motion will do.
         helper = np.where(np.abs(tangent[bad, 0:1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])

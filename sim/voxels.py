@@ -167,7 +167,7 @@ def voxelize_mesh(vertices: NDArray[np.float64], faces: NDArray[np.integer], gri
     qx, qy = q[..., 0] - _RAY_JITTER[0], q[..., 1] - _RAY_JITTER[1]
     area2 = (qx[:, 1] - qx[:, 0]) * (qy[:, 2] - qy[:, 0]) - (qx[:, 2] - qx[:, 0]) * (
         qy[:, 1] - qy[:, 0])
-    keep = np.abs(area2) > 1e-14  # vertical triangles: the ray grazes them, no crossing
+    keep = np.abs(area2) > tol.edge_on  # vertical triangles: the ray grazes them, no crossing
     lo = np.stack([np.ceil(qx.min(1)), np.ceil(qy.min(1))], axis=1).astype(np.int64)
     hi = np.stack([np.floor(qx.max(1)), np.floor(qy.max(1))], axis=1).astype(np.int64)
     lo = np.maximum(lo, 0)

@@ -86,10 +86,10 @@ def common_face(
         bb = barycentric(pb[todo], vertices, faces, fc)
         good = (ba.min(axis=1) >= -BARY_EPS) & (bb.min(axis=1) >= -BARY_EPS)
         good &= np.linalg.norm(interpolate(vertices, faces, fc, ba) - pa[todo], axis=1) <= (
-            1e-7 * scale
+            tol.on_surface * scale
         )
         good &= np.linalg.norm(interpolate(vertices, faces, fc, bb) - pb[todo], axis=1) <= (
-            1e-7 * scale
+            tol.on_surface * scale
         )
         hit = todo[good]
         face[hit] = fc[good]
