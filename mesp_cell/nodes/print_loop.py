@@ -26,6 +26,7 @@ import numpy as np
 from core.errors import InputError
 from core.report import update_report
 from core.status import JobState
+from core.tolerance import tol
 from mesp_cell.bus.session import Bus
 from mesp_cell.drivers.stream import StreamPlan, sha256_of
 from mesp_cell.jobs import JobRecord, JobStore
@@ -293,7 +294,7 @@ class PrintLoop:
         while time.monotonic() < end:
             ext = self.extruder_state
             if (ext is not None and ext.t > asked and ext.connected and not ext.running
-                    and abs(ext.rate) <= 0.01 * max(self.setpoint, 1e-9)):
+                    and abs(ext.rate) <= 0.01 * max(self.setpoint, tol.floor)):
                 return
             time.sleep(0.02)
         log.warning("the screw did not show at rest within %g s; the job's volume may miss "

@@ -176,7 +176,7 @@ def _towards_boundary(v: NDArray[np.float64], f: NDArray[np.int64], bnd: NDArray
     (the outward normal at a boundary vertex) and the piece's index (n,)."""
     d, foot, piece = _nearest_piece(v, pa, pb)
     u = (foot - v) / np.maximum(d, tol.zero)[:, None]
-    on_boundary = d <= 1e-9 * max(float(np.ptp(v, axis=0).max()), tol.zero)
+    on_boundary = d <= tol.slack * max(float(np.ptp(v, axis=0).max()), tol.zero)
     u = np.where(on_boundary[:, None], _outward(v, f.astype(np.int32), bnd), u)
     return d, u, piece
 
