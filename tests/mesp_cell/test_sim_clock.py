@@ -80,8 +80,9 @@ def test_a_lagging_twin_pauses_the_extruders_clock(tmp_path: Path) -> None:
     assert wall > 30 * simulated / scale  # the twin really lagged
     assert twin.clock.paused() > 0.9 * wall
     shared, old = np.subtract(volumes[-1], volumes[1])  # the first period warms up
-    # The plant reads the clock a few us after each period ends: at 100x, a few ms of flow.
-    assert shared == pytest.approx(rate * simulated, abs=rate * 0.004)
+    # The plant reads the clock a few us after each period ends: at 100x, a few ms of flow; a
+    # loaded host (the suite's other worker) delays a read by up to ~0.3 ms, 30 ms of flow.
+    assert shared == pytest.approx(rate * simulated, abs=rate * 0.03)
     assert old > 10 * rate * simulated  # the old, private clock over-extrudes
 
 
