@@ -77,10 +77,7 @@ def ridge_line(ring: NDArray[np.float64], width: float, start: NDArray[np.float6
 
 def inside_polygon(points: NDArray[np.float64], polygon: NDArray[np.float64]) -> NDArray[np.bool_]:
     """(k,) bool, which of ``points`` ((k, 2)) lie inside the closed ``polygon`` ((n, 2),
-    its last point joined to its first): crossing number, vectorised over points x edges."""
-    a, b = polygon, np.roll(polygon, -1, axis=0)
-    py = points[:, 1:2]
-    span = (a[None, :, 1] > py) != (b[None, :, 1] > py)
-    dy = np.where(np.abs(b[:, 1] - a[:, 1]) > tol.zero, b[:, 1] - a[:, 1], tol.zero)
-    x_cross = a[None, :, 0] + (py - a[None, :, 1]) * ((b[:, 0] - a[:, 0]) / dy)[None, :]
-    return np.asarray(np.count_nonzero(span & (points[:, 0:1] < x_cross), axis=1) % 2 == 1)
+    its last point joined to its first): matplotlib's point-in-polygon test."""
+    from matplotlib.path import Path
+
+    return np.asarray(Path(polygon, closed=False).contains_points(points), dtype=bool)
