@@ -298,21 +298,29 @@ def split_segments(a: NDArray[np.float64], b: NDArray[np.float64]
     return a[owner] + t0[:, None] * d, a[owner] + t1[:, None] * d
 
 
+def segment_feet(p: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Distance (...) mm and foot (..., 3) mm of points p on segments a-b (all (..., 3) mm,
+    broadcast against each other)."""
+    ab = b - a
+    t = np.einsum("...j,...j->...", p - a, ab) / np.maximum(
+        np.einsum("...j,...j->...", ab, ab), tol.zero)
+    foot = a + np.clip(t, 0.0, 1.0)[..., None] * ab
+    return np.asarray(np.linalg.norm(p - foot, axis=-1)), foot
+
+
 def nearest_feet(points: NDArray[np.float64], pa: NDArray[np.float64],
                  pb: NDArray[np.float64], k: int
-                 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Distances (P, k) mm and feet (P, k, 3) mm from each point to the k pieces pa-pb with
-    the nearest midpoints (fewer columns when there are fewer pieces)."""
+                 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
+    """Distances (P, k) mm, feet (P, k, 3) mm and piece indices (P, k) from each point to
+    the k pieces pa-pb with the nearest midpoints (fewer columns when there are fewer
+    pieces)."""
     tree = cKDTree(0.5 * (pa + pb))
     kk = min(k, len(pa))
     _, near = tree.query(points, k=kk)
-    near = near.reshape(len(points), kk)
-    sa, sb = pa[near], pb[near]  # (P, kk, 3)
-    ab = sb - sa
-    t = np.einsum("ukj,ukj->uk", points[:, None, :] - sa, ab) / np.maximum(
-        np.einsum("ukj,ukj->uk", ab, ab), tol.zero)
-    foot = sa + np.clip(t, 0.0, 1.0)[..., None] * ab
-    return np.linalg.norm(points[:, None, :] - foot, axis=2), foot
+    near = np.asarray(near, dtype=np.int64).reshape(len(points), kk)
+    dist, foot = segment_feet(points[:, None, :], pa[near], pb[near])
+    return dist, foot, near
 
 
 def planar_boundary_distance(vertices: NDArray[np.float64], faces: NDArray[np.integer]

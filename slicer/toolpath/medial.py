@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from core.tolerance import tol
-from slicer.toolpath.eikonal import split_segments
+from slicer.toolpath.eikonal import nearest_feet, segment_feet, split_segments
 from slicer.toolpath.isolines import Nodes, lines_from_segments
 from slicer.toolpath.line_ends import extend_to_boundary
 from slicer.toolpath.lines import SurfaceLines, empty_lines
@@ -64,8 +64,8 @@ def medial_lines(vertices: NDArray[np.float64], faces: NDArray[np.int32]) -> Sur
     crossed = ((np.einsum("ij,ij->i", u[i], u[j]) < np.cos(np.radians(MEDIAL_ANGLE)))
                & (topo.edge_faces == 2))
     # equal distance to the two feet's pieces along the edge (linear between the ends)
-    phi_i = d[i] - _to_piece(v[i], pa[piece[j]], pb[piece[j]])
-    phi_j = _to_piece(v[j], pa[piece[i]], pb[piece[i]]) - d[j]
+    phi_i = d[i] - segment_feet(v[i], pa[piece[j]], pb[piece[j]])[0]
+    phi_j = segment_feet(v[j], pa[piece[i]], pb[piece[i]])[0] - d[j]
     t = np.clip(-phi_i / np.where(np.abs(phi_j - phi_i) > tol.zero, phi_j - phi_i, 1.0),
                 0.0, 1.0)
     t = np.where(np.abs(phi_j - phi_i) > tol.zero, t, 0.5)
@@ -181,28 +181,11 @@ def _towards_boundary(v: NDArray[np.float64], f: NDArray[np.int64], bnd: NDArray
     return d, u, piece
 
 
-def _to_piece(x: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[np.float64]
-              ) -> NDArray[np.float64]:
-    """(k,) distance of points x (k, 3) to the segments a-b (k, 3), row by row."""
-    ab = b - a
-    t = np.clip(np.einsum("ij,ij->i", x - a, ab)
-                / np.maximum(np.einsum("ij,ij->i", ab, ab), tol.zero), 0.0, 1.0)
-    return np.asarray(np.linalg.norm(x - (a + t[:, None] * ab), axis=1))
-
-
 def _nearest_piece(x: NDArray[np.float64], pa: NDArray[np.float64], pb: NDArray[np.float64]
                    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.int64]]:
     """Distance (n,) mm, foot (n, 3) mm and index (n,) of the nearest piece pa-pb to each
     point x (n, 3), among the NEAREST with the nearest midpoints."""
-    k = min(NEAREST, len(pa))
-    _, near = cKDTree(0.5 * (pa + pb)).query(x, k=k)
-    near = np.asarray(near, dtype=np.int64).reshape(len(x), k)
-    sa, sb = pa[near], pb[near]  # (n, k, 3)
-    ab = sb - sa
-    t = np.clip(np.einsum("nkj,nkj->nk", x[:, None, :] - sa, ab)
-                / np.maximum(np.einsum("nkj,nkj->nk", ab, ab), tol.zero), 0.0, 1.0)
-    feet = sa + t[..., None] * ab
-    dist = np.linalg.norm(x[:, None, :] - feet, axis=2)
+    dist, feet, near = nearest_feet(x, pa, pb, NEAREST)
     best = np.argmin(dist, axis=1)
     rows = np.arange(len(x))
     return dist[rows, best], feet[rows, best], near[rows, best]

@@ -11,24 +11,13 @@ of up to 1 W). Measured effect: docs/benchmarks.md ("Moved from docstrings", str
 from __future__ import annotations
 
 import numpy as np
-from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
-from core.tolerance import tol
+from slicer.toolpath.eikonal import segment_feet
 from slicer.toolpath.lines import SurfaceLines
 
 CONVERGE_TRIM = 0.7  # open stripe ends closer than this x spacing to a longer stripe are cut
 TRIM_REACH = 8.0  # ... within this x spacing (arc length) of the end
-
-
-def _point_segment_distance(p: NDArray[np.float64], a: NDArray[np.float64],
-                            b: NDArray[np.float64]) -> NDArray[np.float64]:
-    """(..., ) distance from points p to segments a-b (all (..., 3), broadcast)."""
-    ab = b - a
-    t = np.einsum("...j,...j->...", p - a, ab) / np.maximum(
-        np.einsum("...j,...j->...", ab, ab), tol.zero)
-    q = a + np.clip(t, 0.0, 1.0)[..., None] * ab
-    return np.asarray(np.linalg.norm(p - q, axis=-1))
 
 
 def trim_converging(lines: SurfaceLines, spacing: float, ratio: float = CONVERGE_TRIM,
@@ -81,7 +70,7 @@ def trim_converging(lines: SurfaceLines, spacing: float, ratio: float = CONVERGE
         pi, si = test[pairs["i"]], pairs["j"]
         longer = rank[ln[seg[si]]] < rank[ln[pi]]
         pi, si = pi[longer], si[longer]
-        close = _point_segment_distance(p[pi], a[si], b[si]) < ratio * spacing
+        close = segment_feet(p[pi], a[si], b[si])[0] < ratio * spacing
         bad = np.zeros(len(p), dtype=bool)
         bad[pi[close]] = True
         if not bad.any():

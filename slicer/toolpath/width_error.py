@@ -172,7 +172,7 @@ def band_width(points: NDArray[np.float64], a: NDArray[np.float64], b: NDArray[n
     out = np.full(len(x), np.nan)
     if len(x) == 0 or len(a) == 0:
         return out
-    dist, foot = nearest_feet(x, *split_segments(a, b), k)
+    dist, foot, _ = nearest_feet(x, *split_segments(a, b), k)
     first = np.argmin(dist, axis=1)
     rows = np.arange(len(x))
     toward = foot[rows, first] - x  # (P, 3) towards the nearest boundary
