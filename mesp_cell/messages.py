@@ -26,6 +26,18 @@ FAULT_STALL = 1 << 1
 FAULT_OVERLOAD = 1 << 2
 FAULT_ESTOP = 1 << 3
 FAULT_LINK = 1 << 8  # host-side: the driver lost the link to the controller
+FAULT_NAMES = {FAULT_WATCHDOG: "watchdog", FAULT_STALL: "stall", FAULT_OVERLOAD: "overload",
+               FAULT_ESTOP: "e-stop", FAULT_LINK: "link"}
+
+
+def fault_text(bits: int) -> str:
+    """The fault bits as words ("e-stop latched at the controller (0x8)"); "" if none."""
+    if not bits:
+        return ""
+    names = [n for bit, n in FAULT_NAMES.items() if bits & bit]
+    unknown = bits & ~sum(FAULT_NAMES)
+    words = " + ".join(names + ([f"unknown {unknown:#x}"] if unknown else []))
+    return f"{words} latched at the controller ({bits:#x})"
 
 
 @register(1)

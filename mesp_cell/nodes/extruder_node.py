@@ -26,6 +26,7 @@ from mesp_cell.messages import (
     ExtruderState,
     Reply,
     RobotState,
+    fault_text,
 )
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 
@@ -223,7 +224,7 @@ class ExtruderNode(LifecycleNode):
                 self.connected = True
                 msg = ExtruderState(time.time(), self._seq, r.rate_set, r.rate, r.volume,
                                     r.running, True, r.fault,
-                                    "" if not r.fault else f"controller fault bits {r.fault:#x}")
+                                    fault_text(r.fault))
             except ExtruderLinkError as exc:
                 self._exchange_t = 0.0
                 if self.connected:

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from mesp_cell.messages import ExtruderState
+from mesp_cell.messages import ExtruderState, fault_text
 from mesp_cell.nodes.flow_check import FlowCheck
 
 
@@ -49,6 +49,11 @@ def _must_run(extrude: Any, idx: np.ndarray, K: int, lead_n: int, margin_n: int,
     last_off = np.maximum(np.maximum.accumulate(np.where(off, idx, -1)), last_off_before)
     settled = (last_off < start) | (idx - last_off - 1 >= margin_n)
     return ext & cmd_on & settled, int(last_off[-1]) if len(idx) else last_off_before
+
+
+def fault_reason(ext: ExtruderState) -> str:
+    """Why a faulted extruder stops the stream, in words ("extruder fault: e-stop latched ...")."""
+    return f"extruder fault: {ext.detail or fault_text(ext.fault)}"
 
 
 class MustRun:
@@ -123,7 +128,7 @@ class Interlock:
         if ext is None or age > self.fresh_s:
             return f"no extruder state for {age * 1000:.0f} ms"
         if ext.fault:
-            return f"extruder fault {ext.fault:#x}: {ext.detail}"
+            return fault_reason(ext)
         if not ext.running:
             return "extruder not running where the trajectory deposits"
         return self.flow.mismatch()
@@ -142,7 +147,7 @@ class Interlock:
                 return self.extruder_reason()
             ext = self.ext  # a faulted extruder stops travel moves too, at once
             if ext is not None and ext.fault and time.monotonic() - self.ext_t <= self.fresh_s:
-                return f"extruder fault {ext.fault:#x}: {ext.detail}"
+                return fault_reason(ext)
             return ""
 
         return check

@@ -19,12 +19,9 @@ import numpy as np
 
 from core.status import JobState
 from mesp_cell.drivers.stream import StreamPlan
-from mesp_cell.messages import FAULT_ESTOP, ExtruderState, JobProgress, RobotState
+from mesp_cell.messages import FAULT_ESTOP, FAULT_NAMES, ExtruderState, JobProgress, RobotState
 from mesp_cell.planned_ink import planned_ink
 from planner.plan_summary import PlanSummary
-
-FAULT_NAMES = {1 << 0: "watchdog", 1 << 1: "stall", 1 << 2: "overload", 1 << 3: "e-stop",
-               1 << 8: "link"}
 
 
 @dataclass(frozen=True)

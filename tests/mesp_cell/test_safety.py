@@ -74,6 +74,13 @@ def rec(client: CellClient) -> Recorder:
     return Recorder(client)
 
 
+@pytest.fixture(autouse=True)
+def estop_cleared(client: CellClient) -> Iterator[None]:
+    """A test that fails with the e-stop latched does not take the next tests with it."""
+    yield
+    client.reset_estop()
+
+
 @pytest.fixture
 def model(tmp_path: Path) -> Path:
     path = tmp_path / "ring.stl"
