@@ -65,6 +65,7 @@ class LifecycleNode:
         self.bus: Bus | None = None
         self.stopping = threading.Event()
         self.failed = ""  # why the node stopped on its own (a worker thread died)
+        self._failed_t = 0.0  # s, monotonic, when it failed
         self._seq = 0
         self._threads: list[threading.Thread] = []
         self._workers: list[threading.Thread] = []
@@ -102,7 +103,8 @@ class LifecycleNode:
         self.spawn(self._heartbeat, "heartbeat")
 
     def deactivate(self) -> None:
-        if self.state == NodeState.ACTIVE:
+        """Make devices safe; a failed node too (its devices were active when it failed)."""
+        if self.state in (NodeState.ACTIVE, NodeState.FAILED):
             self.state = NodeState.INACTIVE
             self.on_deactivate()
 
@@ -119,8 +121,18 @@ class LifecycleNode:
 
     # -- helpers ---------------------------------------------------------------------------
     def spawn(self, target: Any, name: str) -> threading.Thread:
-        """Start a daemon thread that belongs to this node."""
-        t = threading.Thread(target=target, name=f"{self.name}-{name}", daemon=True)
+        """Start a daemon thread that belongs to this node. An exception that escapes it is
+        a bug: the node says so and stops (the launcher restarts it), rather than beating on
+        with a dead loop (an extruder whose poll died would look alive and publish nothing)."""
+
+        def guarded() -> None:
+            try:
+                target()
+            except Exception as exc:
+                self._node_failed(f"thread {name} crashed: {type(exc).__name__}: {exc}")
+                log.exception("%s: thread %s crashed", self.name, name)
+
+        t = threading.Thread(target=guarded, name=f"{self.name}-{name}", daemon=True)
         t.start()
         self._threads.append(t)
         return t
@@ -168,13 +180,18 @@ class LifecycleNode:
                 return
             dead = [t.name for t in self._workers if not t.is_alive()]
             if dead:  # say so and stop: a node that cannot answer must not look healthy
-                self.failed = f"worker thread {dead[0]} died"
-                self.state = NodeState.FAILED
-                log.error("%s: %s; stopping so the launcher restarts it", self.name, self.failed)
+                self._node_failed(f"worker thread {dead[0]} died")
             self._beat()
-            if dead:
+            if self.failed:
                 self.stopping.set()
                 return
+
+    def _node_failed(self, why: str) -> None:
+        """Mark the node failed; the heartbeat publishes it and stops the node."""
+        if not self.failed:
+            self.failed, self._failed_t = why, time.monotonic()
+            self.state = NodeState.FAILED
+            log.error("%s: %s; stopping so the launcher restarts it", self.name, why)
 
     def run(self) -> int:
         """Configure, activate, serve until SIGINT/SIGTERM, then deactivate and shut down."""
@@ -190,7 +207,8 @@ class LifecycleNode:
             self.activate()
             log.info("%s active (pid %d)", self.name, os.getpid())
             while not self.stopping.wait(0.2):
-                pass
+                if self.failed and time.monotonic() - self._failed_t > 2 * self.heartbeat_s + 0.5:
+                    break  # the heartbeat that should have stopped the node is gone too
             if self.failed:
                 return 1
         except NodeStartError as exc:
