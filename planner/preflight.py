@@ -22,11 +22,13 @@ from core.stages import Toolpath
 from planner.cell import CellConfig
 from planner.nozzle_axis import tool_rotation
 from planner.placement import _fits, fit_gel, model_transform
+from planner.preflight_walls import walls_text
 from planner.reach import COLLISION, OK, REASONS, Reach
 from slicer.config import UNIT_SCALE_MM, JobConfig
 from slicer.critical import CriticalSelection, select_critical_regions
 from slicer.mesh_io import Surface
 from slicer.operators import BoundaryFaces, TetOperators
+from slicer.wall_thickness import wall_thickness
 
 # smaller than this (mm, largest extent) a part is a few filaments across: likely in cm or in
 SMALL_PART_MM = 10.0
@@ -41,7 +43,7 @@ class Finding:
     """One answer of the preflight.
 
     Attributes:
-        topic: "size", "units", "tank", "gel", "reach" or "critical".
+        topic: "size", "units", "tank", "gel", "reach", "walls" or "critical".
         ok: nothing to fix.
         text: the answer in one line (with the fix where not ok).
     """
@@ -56,7 +58,7 @@ class Preflight:
     """All findings, and the critical regions (for the figure).
 
     Attributes:
-        findings: in the order size, units, tank, gel, reach, critical.
+        findings: in the order size, units, tank, gel, reach, walls, critical.
         selection: the regions the job's selectors pick on ``patches``.
         patches: the surface subdivided to the tet mesh's edge length (``fine_surface``),
             on which the regions were selected.
@@ -184,10 +186,11 @@ def _units(size_mm: float, given: str, cell: CellConfig) -> Finding:
     return Finding("units", True, f"read as {given}: {size_mm:.1f} mm across, a plausible size")
 
 
-def preflight(surface: Surface, job: JobConfig, cell: CellConfig,
+def preflight(surface: Surface, job: JobConfig, cell: CellConfig, line_width_mm: float,
               other_cells: dict[str, CellConfig] | None = None) -> Preflight:
     """The findings for ``surface`` sliced with ``job`` and planned in ``cell`` (see module
-    docstring); ``other_cells`` (name -> cell) are checked for the fit where ``cell`` fails."""
+    docstring) with lines ``line_width_mm`` wide (the job's profile at its layer height);
+    ``other_cells`` (name -> cell) are checked for the fit where ``cell`` fails."""
     size = np.asarray(surface.bbox_mm)
     found = [Finding("size", True, f"{size[0]:.1f} x {size[1]:.1f} x {size[2]:.1f} mm, "
                                    f"{surface.volume_mm3 / 1000:.1f} cm^3")]
@@ -227,6 +230,10 @@ def preflight(surface: Surface, job: JobConfig, cell: CellConfig,
                              f"with the nozzle vertical at the tank centre: {why}; move the "
                              "tank or the robot base ([tank] floor_center_mm, [robot] "
                              "base_xyz_mm) or use a smaller model"))
+    found.append(Finding("walls", *walls_text(
+        wall_thickness(surface), line_width_mm,
+        lambda k: (fits_tank(cell, size * k) is not None and fits_gel(cell, float(size[2] * k))
+                   and float(size.max() * k) <= job.model.max_size_mm))))
     fine = fine_surface(surface, job.mesh.edge_length_mm)
     selection = select_critical_regions(surface_operators(fine), job.slicing.selectors)
     face_region = np.full(len(fine.faces), -1, dtype=np.int64)

@@ -15,7 +15,8 @@ HELP = """\
 Preflight a model in seconds, without tetrahedralising or slicing it: whether it fits the
 cell (footprint in the tank, height under the gel, the arm's reach with the nozzle vertical),
 whether its units look wrong (a part a few mm or several m across; --units suggested where
-another unit fits), and which critical surfaces the slicer would fix (one line each, and a
+another unit fits), whether its standing walls hold the toolpath's line (a size that does
+suggested, checked), and which critical surfaces the slicer would fix (one line each, and a
 PNG of the chosen patches). An open surface is checked as `mesp slice --repair` would close
 it. Exit 0 when everything fits, 1 when something does not (each problem says its fix).
 """
@@ -34,6 +35,9 @@ def register(sub: Any) -> None:
     p.add_argument("--cell", type=Path, metavar="CELL.toml",
                    help="cell description overriding the bundled default")
     p.add_argument("--units", choices=["mm", "cm", "m", "in"], help="units of the model file")
+    p.add_argument("--scale-to", type=float, metavar="MM",
+                   help="scale the model uniformly so its largest extent is MM, as `mesp slice "
+                   "--scale-to` does")
     p.add_argument("--critical", action="append", metavar="SELECTOR",
                    help="critical region selector as for `mesp slice` (repeatable)")
     p.add_argument("--figure", type=Path, metavar="PNG",
@@ -44,23 +48,30 @@ def register(sub: Any) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Print one line per finding; exit 1 if the part does not fit."""
+    from mesp_cell import profiles
     from planner.cell import load_cell
     from planner.other_cells import bundled_cells
     from planner.preflight import preflight
     from planner.preflight_figure import critical_patches_png
     from slicer.config import load_job
+    from slicer.extrusion import load_profile
     from slicer.mesh_io import load_surface
     from slicer.repair import load_repaired
 
     start = time.perf_counter()
     job = load_job(args.job)
-    overrides: dict[str, dict[str, Any]] = {}
-    if args.units:
-        overrides["model"] = {"units": args.units}
+    cell_name = profiles.default_cell()
+    overrides: dict[str, dict[str, Any]] = {
+        "extrusion": {"profile": profiles.resolve(job.extrusion.profile, cell_name)}}
+    if args.units or args.scale_to is not None:
+        overrides["model"] = {
+            **({"units": args.units} if args.units else {}),
+            **({"scale_to_mm": args.scale_to} if args.scale_to is not None else {}),
+        }
     if args.critical:
         overrides["slicing"] = {"critical": tuple(args.critical)}
-    if overrides:
-        job = job.with_overrides(**overrides)
+    job = job.with_overrides(**overrides)
+    width = float(load_profile(job.extrusion.profile).width(job.slicing.layer_height_mm))
     cell = load_cell(args.cell)
     # any size is read: a part of 8 m or 8 um is what the units finding is for
     units = replace(job.model, max_size_mm=1e12, min_size_mm=1e-12)
@@ -76,7 +87,7 @@ def run(args: argparse.Namespace) -> int:
               if not (path is None and args.cell is None)
               and not (path is not None and args.cell is not None
                        and path.resolve() == args.cell.resolve())}
-    result = preflight(surface, job, cell, others)
+    result = preflight(surface, job, cell, width, others)
     for f in result.findings:
         print(f"{f.topic:>8}: {'ok' if f.ok else 'PROBLEM'}: {f.text}")
     figure = args.figure or Path(f"{args.model.stem}-check.png")

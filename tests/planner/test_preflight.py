@@ -14,6 +14,8 @@ from planner.preflight import fits_gel, fits_tank, preflight
 from slicer.config import load_job
 from slicer.mesh_io import load_surface
 
+W = 2.0  # mm, line width
+
 
 def _box(path: Path, size: tuple[float, float, float]) -> Path:
     box = trimesh.creation.box(extents=size)
@@ -35,10 +37,10 @@ def test_fit_of_footprint_and_height(cell: CellConfig) -> None:
 def test_a_plausible_part_fits_and_names_its_critical_region(tmp_path: Path,
                                                             cell: CellConfig) -> None:
     surface = load_surface(_box(tmp_path / "b.stl", (40.0, 30.0, 20.0)))
-    result = preflight(surface, load_job(), cell)
+    result = preflight(surface, load_job(), cell, W)
     assert result.ok, result.findings
     topics = [f.topic for f in result.findings]
-    assert topics == ["size", "units", "tank", "gel", "reach", "critical"]
+    assert topics == ["size", "units", "tank", "gel", "reach", "walls", "critical"]
     critical = result.findings[-1].text
     assert critical.startswith("1 critical region (1200 mm^2): bottom:45@end 1200 mm^2")
     assert np.isclose(result.selection.regions[0].area, 1200.0)
@@ -46,7 +48,7 @@ def test_a_plausible_part_fits_and_names_its_critical_region(tmp_path: Path,
 
 def test_an_8_mm_part_suggests_other_units(tmp_path: Path, cell: CellConfig) -> None:
     surface = load_surface(_box(tmp_path / "b.stl", (8.0, 6.0, 4.0)))
-    units = preflight(surface, load_job(), cell).findings[1]
+    units = preflight(surface, load_job(), cell, W).findings[1]
     assert not units.ok and "--units cm makes it 80 mm" in units.text
 
 
@@ -55,7 +57,8 @@ def test_a_tall_part_fails_the_gel_and_names_no_wrong_cell(tmp_path: Path) -> No
     tray = load_cell(Path(__file__).parents[2] / "planner" / "cells" / "tray.toml")
     surface = load_surface(_box(tmp_path / "b.stl", (40.0, 40.0, 120.0)))
     # in the tray (80 mm of gel) it does not fit; the default cell (240 mm) holds it
-    found = {f.topic: f for f in preflight(surface, load_job(), tray, {"default": cell}).findings}
+    result = preflight(surface, load_job(), tray, W, {"default": cell})
+    found = {f.topic: f for f in result.findings}
     assert not found["gel"].ok and "it fits the bundled default cell" in found["gel"].text
     assert "reach" not in found  # not asked where the part does not fit
 
@@ -74,3 +77,26 @@ def test_mesp_check_answers_and_draws(tmp_path: Path, capsys: pytest.CaptureFixt
     assert len(err) == 1 and err[0].startswith("mesp: error: 0.8 mm across")
     assert "--units m makes it 800 mm" not in err[0]  # 800 mm does not fit the tank
     assert "--units in makes it 20 mm" in err[0]
+
+
+def _tube(path: Path, outer: float, wall: float, height: float) -> Path:
+    ring = trimesh.creation.annulus(r_min=outer / 2 - wall, r_max=outer / 2, height=height,
+                                    sections=64)
+    ring.export(path)
+    return path
+
+
+def test_mesp_check_refuses_a_thin_tube_and_its_fix_works(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 40 mm tube with 0.5 mm walls holds no line of the bundled profile; the size the
+    check suggests, checked again, holds it."""
+    model = _tube(tmp_path / "tube.stl", 30.0, 0.5, 40.0)
+    png = tmp_path / "tube.png"
+    assert main(["check", str(model), "--figure", str(png)]) == 1
+    captured = capsys.readouterr()
+    walls = next(line for line in captured.out.splitlines() if line.strip().startswith("walls"))
+    assert "walls: PROBLEM" in walls and "slice it at --scale-to" in walls
+    assert captured.err.startswith("mesp: error: ") and captured.err.count("\n") == 1
+    size = walls.split("--scale-to ")[1].split()[0]
+    assert main(["check", str(model), "--scale-to", size, "--figure", str(png)]) == 0
+    assert "walls: ok" in capsys.readouterr().out
