@@ -34,6 +34,7 @@ from slicer.extrusion import ExtrusionProfile
 from slicer.toolpath.layer_build import layer_pattern, layer_toolpath, split_layers
 from slicer.toolpath.linking import Lifter
 from slicer.toolpath.report import toolpath_report
+from slicer.toolpath.thin_features import thin_features
 from slicer.toolpath.results import (
     PATTERN_NAMES,
     LayerResult,
@@ -108,7 +109,8 @@ def compute_toolpath(
     timings["total"] = time.perf_counter() - t_start
     report["timing_s"] = {k: round(v, 3) for k, v in timings.items()}
     report["per_layer"] = stats
-    return ToolpathResult(toolpath, report, stats, errors, status, timings)
+    return ToolpathResult(toolpath, report, stats, errors, status, timings,
+                          thin_features(results))
 
 
 def assemble(results: list[LayerResult]) -> tuple[Toolpath, list[dict[str, Any]]]:
