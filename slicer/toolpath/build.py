@@ -34,7 +34,6 @@ from slicer.extrusion import ExtrusionProfile
 from slicer.toolpath.layer_build import layer_pattern, layer_toolpath, split_layers
 from slicer.toolpath.linking import Lifter
 from slicer.toolpath.report import toolpath_report
-from slicer.toolpath.thin_features import thin_features
 from slicer.toolpath.results import (
     PATTERN_NAMES,
     LayerResult,
@@ -42,6 +41,7 @@ from slicer.toolpath.results import (
     Waypoints,
     travel_waypoints,
 )
+from slicer.toolpath.thin_features import thin_features
 
 SERIAL_BELOW = 4  # fewer layers than this are processed in the calling process
 

@@ -4,7 +4,7 @@ component, one layer and the whole model produced (frozen: built once, then read
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -12,10 +12,8 @@ from numpy.typing import NDArray
 from core.stages import Pattern, Toolpath
 from slicer.status import ToolpathStatus
 from slicer.toolpath.linking import deposit_mask
+from slicer.toolpath.thin_features import ThinFeatures
 from slicer.toolpath.volume import segment_volume
-
-if TYPE_CHECKING:
-    from slicer.toolpath.thin_features import ThinFeatures
 
 PATTERN_NAMES: dict[int, str] = {Pattern.CONTOUR: "contour", Pattern.STRIPE: "stripe"}
 

@@ -16,14 +16,14 @@ which the summed excess is within a share of the model volume.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from core.errors import InputError
-from slicer.toolpath.results import LayerResult
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
 THINNEST = CENTRE_WIDTH_SCALE[0]  # the narrowest line, x the profile's W(H)
@@ -36,6 +36,37 @@ EXCESS_LIMIT = 0.01  # excess ink above this share of the model volume: the part
 SCALE_TARGET = 0.5 * EXCESS_LIMIT
 SIZE_MARGIN = 1.15
 SCALE_STEP_MM = 5.0  # a suggested size is rounded up to this
+
+
+class _Lines(Protocol):
+    """A component's waypoints (``results.Waypoints``)."""
+
+    @property
+    def width(self) -> NDArray[np.float64]: ...
+
+    def deposited(self) -> NDArray[np.float64]: ...
+
+
+class _Component(Protocol):
+    """What is read of a component (``results.ComponentResult``)."""
+
+    @property
+    def waypoints(self) -> _Lines: ...
+    @property
+    def required_mm3(self) -> float: ...
+    @property
+    def deposited_mm3(self) -> float: ...
+    @property
+    def error(self) -> str: ...
+
+
+class _Layer(Protocol):
+    """What is read of a layer (``results.LayerResult``)."""
+
+    @property
+    def index(self) -> int: ...
+    @property
+    def components(self) -> Sequence[_Component]: ...
 
 
 @dataclass(frozen=True)
@@ -107,7 +138,8 @@ class ThinFeatures:
             "limit": EXCESS_LIMIT,
             "wall_mm": self.typical_width_mm(),
             "line_mm": self.typical_line_mm(),
-            "layers": [[int(k), round(float(e), 3)] for k, e in zip(layers, per_layer, strict=True)],
+            "layers": [[int(k), round(float(e), 3)]
+                       for k, e in zip(layers, per_layer, strict=True)],
             "scale": scale,
             "size_mm": size_mm,
             "fits_at_size_mm": suggested_size(size_mm, scale),
@@ -122,7 +154,7 @@ def suggested_size(size_mm: float, scale: float) -> float:
     return float(np.ceil(size_mm * scale * SIZE_MARGIN / SCALE_STEP_MM) * SCALE_STEP_MM)
 
 
-def thin_features(results: list[LayerResult]) -> ThinFeatures:
+def thin_features(results: Sequence[_Layer]) -> ThinFeatures:
     """The components of ``results`` that deposit more than OVER_DEPOSIT beyond their
     required volume (their lines at the narrowest width could not be narrower)."""
     rows = [(r.index, c) for r in results for c in r.components
@@ -169,7 +201,8 @@ class ThinWallsError(InputError):
         does not fit the cell), or a profile with a finer nozzle; or accept thicker walls."""
         accept = ('or print the walls thicker than the model\'s with [toolpath] thin_walls = '
                   '"thicken" in a --job file')
-        finer = "a profile with a finer nozzle (mesp calibrate, then --job with its [extrusion] profile)"
+        finer = ("a profile with a finer nozzle (mesp calibrate, then --job with its [extrusion] "
+                 "profile)")
         if too_big is None:
             return (f"scale it up with --scale-to {self.size_mm:.0f} (its thin walls then "
                     f"print within {100 * EXCESS_LIMIT:.0f}% of their volume), or use "
