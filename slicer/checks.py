@@ -126,8 +126,11 @@ def job_notes(report: Mapping[str, Any]) -> list[str]:
             f"toolpath: walls about {thin['wall_mm']:.2f} mm thick print at the narrowest line "
             f"({thin['line_mm']:.2f} mm) on {len(layers)} layer(s) ({layers[0]}-{layers[-1]}), "
             f"{100 * thin['excess_share']:+.1f}% of the model's volume in extra ink (see "
-            f"toolpath.too_thin); fix: --scale-to {thin['fits_at_size_mm']:.0f}, or a profile "
-            "with a finer nozzle")
+            f"toolpath.too_thin); fix: " + (
+                f"--scale-to {thin['fits_at_size_mm']:.0f}, or a profile with a finer nozzle"
+                if not thin.get("too_big") else
+                f"a profile with a finer nozzle (at --scale-to {thin['fits_at_size_mm']:.0f}, "
+                f"{thin['too_big']})"))
     error = toolpath.get("volume_error")
     if error is not None and abs(float(error)) > VOLUME_ERROR and not thick:
         narrowest = toolpath.get("width_over_profile", {}).get("min")

@@ -235,7 +235,7 @@ def _toolpath(
                               measure_baselines=job.toolpath.measure_baselines)
     report = dict(result.report)
     model_volume = surface.volume_mm3
-    _too_thin(result, report, job, surface)
+    _too_thin(result, report, job, surface, extraction.slab_mm3)
     toolpath = result.toolpath
     if job.toolpath.flush:
         from slicer.toolpath.flush import flush_toolpath
@@ -268,15 +268,23 @@ def _toolpath(
 
 
 def _too_thin(result: ToolpathResult, report: dict[str, Any], job: JobConfig,
-              surface: Surface) -> None:
+              surface: Surface, slab_mm3: np.ndarray) -> None:
     """Adds ``too_thin`` (``thin_features.ThinFeatures.summary``) to the toolpath ``report``
-    and each marked layer's excess to its per-layer entry; raises ``ThinWallsError`` when
+    and each marked layer's excess to its per-layer entry (extra ink within the layer's slab
+    of the solid, ``slab_mm3`` (len(iso),) mm^3, not counted); raises ``ThinWallsError`` when
     that excess and the whole volume error both exceed the limit and the job refuses."""
     from slicer.toolpath.thin_features import EXCESS_LIMIT, ThinFeatures, ThinWallsError
 
     thin = result.thin if result.thin is not None else ThinFeatures(
         np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0))
     volume = surface.volume_mm3
+    slab = np.asarray(slab_mm3, dtype=np.float64)
+    laid = np.zeros(len(slab))
+    for entry in report.get("per_layer", []):
+        if int(entry["layer"]) < len(slab):
+            laid[int(entry["layer"])] = float(entry["deposited_mm3"])
+    if len(slab) and len(thin.layer) and int(thin.layer.max()) < len(slab):
+        thin = thin.within_slabs(laid, slab)
     section = thin.summary(volume, float(max(surface.bbox_mm)))
     report["too_thin"] = section
     excess = dict((k, e) for k, e in section["layers"])

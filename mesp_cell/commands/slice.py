@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -108,7 +109,7 @@ def job_from_args(args: argparse.Namespace) -> JobConfig:
     return job.with_overrides(**overrides) if overrides else job
 
 
-def _too_big(cell: CellConfig, bbox_mm: tuple[float, ...]) -> str | None:
+def _too_big(cell: CellConfig, bbox_mm: Sequence[float]) -> str | None:
     """Why a part of ``bbox_mm`` (3,) mm would not fit ``cell`` (its tank or gel), or None."""
     import numpy as np
 
@@ -162,6 +163,16 @@ def run(args: argparse.Namespace) -> int:
 
         section, _ = check(Toolpath.load(args.out), cell)
         report = update_report(args.out, {"printability": section})
+    thin = report.get("toolpath", {}).get("too_thin", {})
+    if thin.get("excess_share", 0.0) > thin.get("limit", float("inf")):
+        # printed thicker (thin_walls = "thicken"): the size the note names, against the cell
+        from core.report import update_report
+
+        bbox = report["model"]["bbox_mm"]
+        grow = float(thin["fits_at_size_mm"]) / max(bbox)
+        section = {**report["toolpath"],
+                   "too_thin": {**thin, "too_big": _too_big(cell, [grow * b for b in bbox])}}
+        report = update_report(args.out, {"toolpath": section})
     for note in job_notes(report):  # even with --quiet: they may need acting on
         print(f"note: {note}", flush=True)
     return 0

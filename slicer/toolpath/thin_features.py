@@ -78,17 +78,40 @@ class ThinFeatures:
         required_mm3: (k,) float64, mm^3, the integral of H over it.
         deposited_mm3: (k,) float64, mm^3, what its lines lay.
         line_mm: (k,) float64, mm, the mean width its lines print at (volume-weighted).
+        counted: (k,) float64 in [0, 1], the share of each one's extra ink that lies beyond
+            its layer's slab of the solid (``within_slabs``; 1 unless set).
     """
 
     layer: NDArray[np.int64]
     required_mm3: NDArray[np.float64]
     deposited_mm3: NDArray[np.float64]
     line_mm: NDArray[np.float64]
+    counted: NDArray[np.float64] | None = None
+
+    @property
+    def extra_mm3(self) -> NDArray[np.float64]:
+        """(k,) float64, mm^3, each component's ink beyond what it holds, as counted."""
+        extra = self.deposited_mm3 - self.required_mm3
+        return extra if self.counted is None else extra * self.counted
 
     @property
     def excess_mm3(self) -> float:
         """Ink laid beyond what these components hold, mm^3."""
-        return float(np.sum(self.deposited_mm3 - self.required_mm3))
+        return float(np.sum(self.extra_mm3))
+
+    def within_slabs(self, layer_deposited: NDArray[np.float64], slab_mm3: NDArray[np.float64]
+                     ) -> ThinFeatures:
+        """These components with only the extra ink that lies beyond their layer's slab
+        counted: a layer whose surface only grazes the top of its slab (a part ending
+        mid-slab: slivers where its top pokes through the layer) holds less than its slab
+        even with the slivers' ink, and that ink is the slab's. layer_deposited, slab_mm3:
+        (L,) mm^3 per layer index (what the whole layer lays; the exact slab volume)."""
+        extra = self.deposited_mm3 - self.required_mm3
+        raw = np.bincount(self.layer, weights=extra, minlength=len(slab_mm3))
+        beyond = np.maximum(np.asarray(layer_deposited) - np.asarray(slab_mm3), 0.0)
+        share = np.divide(np.minimum(raw, beyond), raw, out=np.zeros_like(raw), where=raw > 0)
+        return ThinFeatures(self.layer, self.required_mm3, self.deposited_mm3, self.line_mm,
+                            share[self.layer])
 
     @property
     def width_mm(self) -> NDArray[np.float64]:
@@ -99,23 +122,25 @@ class ThinFeatures:
     def typical_width_mm(self) -> float:
         """The median width of the too-thin components, weighted by their excess ink
         (NaN without any)."""
-        return _weighted_median(self.width_mm, self.deposited_mm3 - self.required_mm3)
+        return _weighted_median(self.width_mm, self.extra_mm3)
 
     def typical_line_mm(self) -> float:
         """The median width their lines print at, weighted like ``typical_width_mm``."""
-        return _weighted_median(self.line_mm, self.deposited_mm3 - self.required_mm3)
+        return _weighted_median(self.line_mm, self.extra_mm3)
 
     def scale_for(self, model_mm3: float, limit: float = SCALE_TARGET) -> float:
         """The smallest uniform scale s >= 1 of the model at which the excess is at most
         ``limit`` x the model volume (module docstring)."""
         req, q = self.required_mm3, self.deposited_mm3 / np.maximum(self.required_mm3, 1e-12)
+        if self.counted is not None:
+            req = req * self.counted
 
         def share(s: float) -> float:
             return float(np.sum(req * np.maximum(q - s, 0.0))) / (s * model_mm3)
 
         if model_mm3 <= 0 or share(1.0) <= limit:
             return 1.0
-        lo, hi = 1.0, float(q.max())
+        lo, hi = 1.0, float(q[req > 0].max())
         for _ in range(60):
             mid = 0.5 * (lo + hi)
             lo, hi = (lo, mid) if share(mid) <= limit else (mid, hi)
@@ -127,19 +152,19 @@ class ThinFeatures:
         size (largest extent, mm) at which the excess falls to SCALE_TARGET."""
         layers = np.unique(self.layer)
         per_layer = np.bincount(np.searchsorted(layers, self.layer),
-                                weights=self.deposited_mm3 - self.required_mm3,
-                                minlength=len(layers))
+                                weights=self.extra_mm3, minlength=len(layers))
+        keep = per_layer > 0
         share = self.excess_mm3 / model_mm3 if model_mm3 > 0 else 0.0
         scale = self.scale_for(model_mm3)
         return {
-            "components": len(self.layer),
             "excess_mm3": self.excess_mm3,
             "excess_share": share,
             "limit": EXCESS_LIMIT,
             "wall_mm": self.typical_width_mm(),
             "line_mm": self.typical_line_mm(),
             "layers": [[int(k), round(float(e), 3)]
-                       for k, e in zip(layers, per_layer, strict=True)],
+                       for k, e in zip(layers[keep], per_layer[keep], strict=True)],
+            "components": int(np.sum(self.extra_mm3 > 0)),
             "scale": scale,
             "size_mm": size_mm,
             "fits_at_size_mm": suggested_size(size_mm, scale),

@@ -96,6 +96,10 @@ def test_walls_printed_thicker_than_the_model_are_noted_with_their_layers() -> N
     (note,) = job_notes(_report(volume_error=0.45, too_thin=thin))
     assert "walls about 0.58 mm thick print at the narrowest line (1.15 mm)" in note
     assert "2 layer(s) (1-6)" in note and "--scale-to 100" in note
+    too_big = dict(thin, too_big="265 mm tall, it would stand out of the gel (240 mm)")
+    (note,) = job_notes(_report(volume_error=0.45, too_thin=too_big))
+    assert note.endswith("fix: a profile with a finer nozzle (at --scale-to 100, 265 mm tall, "
+                         "it would stand out of the gel (240 mm))")
     small = dict(thin, excess_share=0.004)
     assert job_notes(_report(too_thin=small)) == []
 

@@ -75,6 +75,20 @@ def test_the_summary_marks_each_layer_with_its_excess() -> None:
     assert section["fits_at_size_mm"] > 40.0
 
 
+def test_extra_ink_within_the_layers_slab_is_not_counted() -> None:
+    """A layer that only grazes the top of its slab (a part ending mid-slab): slivers whose
+    lines lay 9 x their own volume but less than the slab holds count nothing; a layer that
+    lays beyond its slab counts what lies beyond it."""
+    thin = ThinFeatures(layer=np.array([1, 4]), required_mm3=np.array([280.0, 5.0]),
+                        deposited_mm3=np.array([300.0, 45.0]), line_mm=np.full(2, 1.8))
+    laid = np.array([600.0, 300.0, 200.0, 200.0, 45.0])
+    slab = np.array([600.0, 290.0, 200.0, 200.0, 75.0])
+    counted = thin.within_slabs(laid, slab)
+    assert counted.excess_mm3 == pytest.approx(10.0)
+    section = counted.summary(model_mm3=1340.0, size_mm=40.0)
+    assert section["layers"] == [[1, 10.0]] and section["components"] == 1
+
+
 def test_the_refusal_names_the_wall_the_line_the_layers_and_a_size() -> None:
     section = {"too_thin": {"wall_mm": 0.2, "line_mm": 1.15, "size_mm": 40.0,
                             "excess_share": 4.7, "layers": [[0, 5.5], [66, 4.5]],
