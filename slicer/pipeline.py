@@ -7,6 +7,7 @@ directory as soon as it exists, so an interrupted run loses nothing already comp
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -84,6 +85,9 @@ def slice_model(
 
             tetmesh, stats = tetrahedralize.tetrahedralize(surface, job.mesh, progress,
                                                            cache=cache_dir())
+            if stats.cached:  # against the surface as measured now (the union of its shells)
+                stats = replace(stats, surface_volume_mm3=surface.volume_mm3,
+                                volume_error=stats.volume_mm3 / surface.volume_mm3 - 1.0)
         else:
             tetmesh = given
             stats = tetrahedralize.quality(tetmesh.vertices, tetmesh.tets, surface.volume_mm3)

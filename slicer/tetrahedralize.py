@@ -221,11 +221,7 @@ def tetrahedralize(
     if hit is not None:
         progress.update(1.0, f"{hit[1].tets} tets, {hit[1].vertices} vertices (the mesh made "
                              "before for this model and settings)")
-        # the volume error against the surface as it is measured now (stored meshes keep
-        # the measure of their day)
-        volume = surface.volume_mm3
-        return hit[0], replace(hit[1], cached=True, surface_volume_mm3=volume,
-                               volume_error=hit[1].volume_mm3 / volume - 1.0)
+        return hit[0], replace(hit[1], cached=True)
     mesh, stats = _fresh(surface, config, grading, threads, progress)
     tet_cache.store(cache, key, mesh, stats)
     return mesh, stats

@@ -21,8 +21,8 @@ from core.tolerance import tol
 from slicer.toolpath.lines import SurfaceLines, empty_lines
 from slicer.toolpath.mapback import barycentric
 
-TIP_INSET = 0.2  # each end of the chord pulled in by this share of it (at most W / 2): a disc
-# one W across then needs a line 1.3 W wide (0.25: 1.57 W, beyond the widest filament)
+TIP_INSET = 0.1  # each end of the chord pulled in by this share of it (at most W / 2): the
+# line's band over a disc D across is then about D wide (0.2: 1.3 D, spilling over its sides)
 TIP_POINTS = 41  # points sampled along the chord
 NEAREST_FACES = 16  # candidate faces per point for its foot on the surface
 ON_SURFACE = 0.05  # a chord point whose foot lies farther than this x the chord is off it

@@ -22,7 +22,7 @@ def test_the_tip_line_crosses_the_disc_through_its_centre() -> None:
     ends = lines.points[[0, -1]]
     assert np.linalg.norm(ends.mean(axis=0)[:2]) < 0.15  # through the centre
     length = float(np.linalg.norm(ends[1] - ends[0]))
-    assert abs(length - (1.0 - 2 * TIP_INSET) * 2.5) < 0.25  # inset by a fifth at each end
+    assert abs(length - (1.0 - 2 * TIP_INSET) * 2.5) < 0.25  # inset by a tenth at each end
 
 
 def test_a_disc_one_width_across_prints_its_volume() -> None:
