@@ -58,6 +58,10 @@ def measure(job_dir: Path) -> dict[str, Any]:
     row["volume_error"] = deposited / model_volume - 1.0
     row["layer_volume_error"] = float(rep["layer_volume_error"])
     row["fallbacks"] = {k: int(v) for k, v in rep["thin_fallback"].items()}
+    # ink laid beyond what too-thin components hold (before the slab correction the
+    # pipeline applies: an upper bound of the report's toolpath.too_thin)
+    row["too_thin_share"] = (result.thin.excess_mm3 / model_volume
+                             if result.thin is not None else 0.0)
     return row
 
 

@@ -117,8 +117,22 @@ def job_notes(report: Mapping[str, Any]) -> list[str]:
                 f"toolpath: {name} layers leave {100 * cov['gap']:.1f}% of their area bare and "
                 f"cover {100 * cov['overlap']:.1f}% twice (limit "
                 f"{100 * COVERAGE_LIMIT[name]:.0f}% each); see toolpath.coverage.per_layer")
+    thin = toolpath.get("too_thin", {})
+    thick = thin.get("excess_share", 0.0) > thin.get("limit", float("inf"))
+    if thick:
+        # printed anyway (thin_walls = "thicken"): the walls come out thicker than the model's
+        layers = [k for k, _ in thin["layers"]]
+        notes.append(
+            f"toolpath: walls about {thin['wall_mm']:.2f} mm thick print at the narrowest line "
+            f"({thin['line_mm']:.2f} mm) on {len(layers)} layer(s) ({layers[0]}-{layers[-1]}), "
+            f"{100 * thin['excess_share']:+.1f}% of the model's volume in extra ink (see "
+            f"toolpath.too_thin); fix: " + (
+                f"--scale-to {thin['fits_at_size_mm']:.0f}, or a profile with a finer nozzle"
+                if not thin.get("too_big") else
+                f"a profile with a finer nozzle (at --scale-to {thin['fits_at_size_mm']:.0f}, "
+                f"{thin['too_big']})"))
     error = toolpath.get("volume_error")
-    if error is not None and abs(float(error)) > VOLUME_ERROR:
+    if error is not None and abs(float(error)) > VOLUME_ERROR and not thick:
         narrowest = toolpath.get("width_over_profile", {}).get("min")
         if float(error) > 0 and narrowest is not None and narrowest <= THINNEST + tol.computed:
             # lines already at the narrowest width the nozzle speed can give, still too much

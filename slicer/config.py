@@ -187,10 +187,13 @@ class ToolpathConfig:
     stripe_field: Literal["across", "parallel"] = _JOB["toolpath"]["stripe_field"]
     measure_baselines: bool = _JOB["toolpath"]["measure_baselines"]
     relieve_bends: bool = _JOB["toolpath"]["relieve_bends"]
+    thin_walls: Literal["refuse", "thicken"] = _JOB["toolpath"]["thin_walls"]
 
     def __post_init__(self) -> None:
         if self.boundary_distance not in ("eikonal", "heat"):
             raise ValueError("boundary_distance must be 'eikonal' or 'heat'")
+        if self.thin_walls not in ("refuse", "thicken"):
+            raise ValueError("thin_walls must be 'refuse' or 'thicken'")
         if self.stripe_field not in ("across", "parallel"):
             raise ValueError("stripe_field must be 'across' or 'parallel'")
         if not 1.0 <= self.join_factor <= 20.0:

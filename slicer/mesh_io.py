@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import io
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +24,7 @@ from core.errors import InputError
 from core.stages import TetMesh
 from core.tolerance import tol
 from slicer.config import UNIT_SCALE_MM, ModelConfig
+from slicer.solid_volume import solid_volume
 from slicer.tet_geometry import compact, orient_positive, tet_volumes
 
 SURFACE_SUFFIXES = (".stl", ".obj", ".ply")
@@ -62,11 +64,11 @@ class Surface:
         if self.faces.ndim != 2 or self.faces.shape[1] != 3:
             raise ValueError(f"faces must be (m, 3), got {self.faces.shape}")
 
-    @property
+    @cached_property
     def volume_mm3(self) -> float:
-        """Enclosed volume, mm^3 (positive for an outward-oriented surface)."""
-        tri = self.vertices[self.faces]
-        return float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6)
+        """Enclosed volume, mm^3 (positive for an outward-oriented surface): overlapping
+        shells counted once (``solid_volume``)."""
+        return solid_volume(self.vertices, self.faces)
 
     @property
     def bbox_mm(self) -> tuple[float, float, float]:

@@ -7,6 +7,7 @@ directory as soon as it exists, so an interrupted run loses nothing already comp
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
@@ -28,6 +29,7 @@ from slicer.mesh_io import Surface
 
 if TYPE_CHECKING:
     from slicer.layers import LayerExtraction, LayerSpacing
+    from slicer.toolpath.results import ToolpathResult
 
 Until = Literal["tetmesh", "layers", "toolpath"]
 
@@ -83,6 +85,9 @@ def slice_model(
 
             tetmesh, stats = tetrahedralize.tetrahedralize(surface, job.mesh, progress,
                                                            cache=cache_dir())
+            if stats.cached:  # against the surface as measured now (the union of its shells)
+                stats = replace(stats, surface_volume_mm3=surface.volume_mm3,
+                                volume_error=stats.volume_mm3 / surface.volume_mm3 - 1.0)
         else:
             tetmesh = given
             stats = tetrahedralize.quality(tetmesh.vertices, tetmesh.tets, surface.volume_mm3)
@@ -102,9 +107,17 @@ def slice_model(
     if until == "layers":
         return _finish(out_dir, report, timer, t0)
 
+    from slicer.toolpath.thin_features import ThinWallsError
+
     with timer.stage("toolpath"):
-        report["toolpath"] = _toolpath(tetmesh, extraction, job, out_dir, surface.volume_mm3,
-                                       progress, alpha or AlphaRange.bundled())
+        try:
+            report["toolpath"] = _toolpath(tetmesh, extraction, job, out_dir, surface,
+                                           progress, alpha or AlphaRange.bundled())
+        except ThinWallsError as exc:
+            # refused before any toolpath file: the report marks the too-thin layers
+            report["toolpath"] = exc.section
+            _finish(out_dir, report, timer, t0)
+            raise
     return _finish(out_dir, report, timer, t0)
 
 
@@ -208,9 +221,11 @@ def _slice(
 
 def _toolpath(
     tetmesh: TetMesh, extraction: LayerExtraction, job: JobConfig, out_dir: Path,
-    model_volume: float, progress: Progress | None, alpha: AlphaRange,
+    surface: Surface, progress: Progress | None, alpha: AlphaRange,
 ) -> dict[str, Any]:
-    """Toolpath generation, its files, pictures and report section."""
+    """Toolpath generation, its files, pictures and report section. A part whose walls are
+    too thin for the narrowest line is refused here (``ThinWallsError``, with the section
+    so far) unless ``toolpath.thin_walls`` is "thicken"."""
     from slicer.extrusion import load_profile
     from slicer.toolpath.build import compute_toolpath
     from slicer.toolpath.coverage import layer_coverage
@@ -223,6 +238,8 @@ def _toolpath(
     result = compute_toolpath(layers, job, profile, progress=progress,
                               measure_baselines=job.toolpath.measure_baselines)
     report = dict(result.report)
+    model_volume = surface.volume_mm3
+    _too_thin(result, report, job, surface, extraction.slab_mm3)
     toolpath = result.toolpath
     if job.toolpath.flush:
         from slicer.toolpath.flush import flush_toolpath
@@ -252,6 +269,37 @@ def _toolpath(
     report["volume_error"] = deposited / model_volume - 1.0 if model_volume > 0 else float("nan")
     report["slab_volume"] = _slab_check(extraction.slab_mm3, report)
     return report
+
+
+def _too_thin(result: ToolpathResult, report: dict[str, Any], job: JobConfig,
+              surface: Surface, slab_mm3: np.ndarray) -> None:
+    """Adds ``too_thin`` (``thin_features.ThinFeatures.summary``) to the toolpath ``report``
+    and each marked layer's excess to its per-layer entry (extra ink within the layer's slab
+    of the solid, ``slab_mm3`` (len(iso),) mm^3, not counted); raises ``ThinWallsError`` when
+    that excess and the whole volume error both exceed the limit and the job refuses."""
+    from slicer.toolpath.thin_features import EXCESS_LIMIT, ThinFeatures, ThinWallsError
+
+    thin = result.thin if result.thin is not None else ThinFeatures(
+        np.zeros(0, np.int64), np.zeros(0), np.zeros(0), np.zeros(0))
+    volume = surface.volume_mm3
+    slab = np.asarray(slab_mm3, dtype=np.float64)
+    laid = np.zeros(len(slab))
+    for entry in report.get("per_layer", []):
+        if int(entry["layer"]) < len(slab):
+            laid[int(entry["layer"])] = float(entry["deposited_mm3"])
+    if len(slab) and len(thin.layer) and int(thin.layer.max()) < len(slab):
+        thin = thin.within_slabs(laid, slab)
+    section = thin.summary(volume, float(max(surface.bbox_mm)))
+    report["too_thin"] = section
+    excess = dict((k, e) for k, e in section["layers"])
+    for entry in report.get("per_layer", []):
+        if int(entry["layer"]) in excess:
+            entry["too_thin_mm3"] = excess[int(entry["layer"])]
+    error = float(report["deposited_volume_mm3"]) / volume - 1.0 if volume > 0 else 0.0
+    if (job.toolpath.thin_walls == "refuse" and section["excess_share"] > EXCESS_LIMIT
+            and error > EXCESS_LIMIT):
+        report["volume_error"] = error
+        raise ThinWallsError(Path(surface.source).name, report, surface.bbox_mm)
 
 
 def _scale_summary(scale: np.ndarray) -> dict[str, Any]:

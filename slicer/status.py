@@ -87,3 +87,4 @@ class ComponentFallback(Status):
     HOLES_FILLED = "holes-filled", "fitted contours left holes (no band): eq. 9's lines fill them"
     NO_BAND = "no-band", "no band: eq. 9's contours alone kept their spacing better"
     WALLS = "walls", "stripes on the wide part, one line along each narrow wall"
+    TIP = "tip", "too small for any line of its pattern (a tip): one line across it"

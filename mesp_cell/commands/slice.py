@@ -4,14 +4,18 @@ from __future__ import annotations
 
 import argparse
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from core.errors import InputError
 from mesp_cell.console import ConsoleProgress
 from slicer.checks import critical_line, job_notes
 from slicer.config import JobConfig, load_job
 from slicer.summary import SliceSummary
+
+if TYPE_CHECKING:
+    from planner.cell import CellConfig
 
 HELP = """\
 Slice a solid model into curved layers and a width-constrained toolpath (paper section 4).
@@ -105,9 +109,26 @@ def job_from_args(args: argparse.Namespace) -> JobConfig:
     return job.with_overrides(**overrides) if overrides else job
 
 
+def _too_big(cell: CellConfig, bbox_mm: Sequence[float]) -> str | None:
+    """Why a part of ``bbox_mm`` (3,) mm would not fit ``cell`` (its tank or gel), or None."""
+    import numpy as np
+
+    from planner.preflight import fits_gel, fits_tank
+
+    size = np.asarray(bbox_mm, dtype=float)
+    if fits_tank(cell, size) is None:
+        return (f"{size[0]:.0f} x {size[1]:.0f} mm, it would not fit the tank "
+                f"({cell.tank.inner_size_mm[0]:.0f} x {cell.tank.inner_size_mm[1]:.0f} mm)")
+    if not fits_gel(cell, float(size[2])):
+        return (f"{size[2]:.0f} mm tall, it would stand out of the gel "
+                f"({cell.tank.gel_fill_mm:.0f} mm)")
+    return None
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the slicing pipeline and print a short summary."""
     from slicer.pipeline import slice_model
+    from slicer.toolpath.thin_features import ThinWallsError
 
     job = job_from_args(args)
     if args.out.exists() and not args.out.is_dir():
@@ -121,6 +142,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         report = slice_model(args.model, args.out, job, progress=progress, until=args.until,
                              alpha=alpha, repair=args.repair)
+    except ThinWallsError as exc:
+        raise exc.with_cell(_too_big(cell, exc.bbox_mm)) from exc
     except InputError as exc:
         if args.repair or "not watertight" not in exc.problem:
             raise
@@ -140,6 +163,16 @@ def run(args: argparse.Namespace) -> int:
 
         section, _ = check(Toolpath.load(args.out), cell)
         report = update_report(args.out, {"printability": section})
+    thin = report.get("toolpath", {}).get("too_thin", {})
+    if thin.get("excess_share", 0.0) > thin.get("limit", float("inf")):
+        # printed thicker (thin_walls = "thicken"): the size the note names, against the cell
+        from core.report import update_report
+
+        bbox = report["model"]["bbox_mm"]
+        grow = float(thin["fits_at_size_mm"]) / max(bbox)
+        section = {**report["toolpath"],
+                   "too_thin": {**thin, "too_big": _too_big(cell, [grow * b for b in bbox])}}
+        report = update_report(args.out, {"toolpath": section})
     for note in job_notes(report):  # even with --quiet: they may need acting on
         print(f"note: {note}", flush=True)
     return 0

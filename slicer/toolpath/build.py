@@ -41,6 +41,7 @@ from slicer.toolpath.results import (
     Waypoints,
     travel_waypoints,
 )
+from slicer.toolpath.thin_features import thin_features
 
 SERIAL_BELOW = 4  # fewer layers than this are processed in the calling process
 
@@ -108,7 +109,8 @@ def compute_toolpath(
     timings["total"] = time.perf_counter() - t_start
     report["timing_s"] = {k: round(v, 3) for k, v in timings.items()}
     report["per_layer"] = stats
-    return ToolpathResult(toolpath, report, stats, errors, status, timings)
+    return ToolpathResult(toolpath, report, stats, errors, status, timings,
+                          thin_features(results))
 
 
 def assemble(results: list[LayerResult]) -> tuple[Toolpath, list[dict[str, Any]]]:

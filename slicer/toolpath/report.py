@@ -120,7 +120,8 @@ def toolpath_report(results: list[LayerResult], tp: Toolpath, profile: Extrusion
         },
         "volume_match_status": statuses,
         "thin_fallback": {kind: sum(c.fallback == kind for c in comps)
-                          for kind in (ComponentFallback.CONTOUR, ComponentFallback.CENTRE_LINE)},
+                          for kind in (ComponentFallback.CONTOUR, ComponentFallback.CENTRE_LINE,
+                                       ComponentFallback.TIP)},
         # contour components that are no band (fitted lines left holes, eq. 9 lines fill them)
         "band_fit_holes_filled": sum(c.fallback == ComponentFallback.HOLES_FILLED for c in comps),
         # no band, and eq. 9's contours alone kept their spacing better than the fitted ones

@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from core.stages import Pattern, Toolpath
 from slicer.status import ToolpathStatus
 from slicer.toolpath.linking import deposit_mask
+from slicer.toolpath.thin_features import ThinFeatures
 from slicer.toolpath.volume import segment_volume
 
 PATTERN_NAMES: dict[int, str] = {Pattern.CONTOUR: "contour", Pattern.STRIPE: "stripe"}
@@ -163,6 +164,7 @@ class ToolpathResult:
         status: ``ToolpathStatus``: OK; VOLUME when some component missed the volume
             tolerance; FAILED_COMPONENTS when some component was skipped (reasons in the report).
         timings: stage -> s (summed over layers for per-layer stages).
+        thin: the components thinner than the narrowest line (``thin_features``).
     """
 
     toolpath: Toolpath
@@ -171,6 +173,7 @@ class ToolpathResult:
     width_errors: dict[str, dict[str, NDArray[np.float64]]]
     status: ToolpathStatus
     timings: dict[str, float]
+    thin: ThinFeatures | None = None
 
 
 def travel_waypoints(points: NDArray[np.float64], normals: NDArray[np.float64],

@@ -36,6 +36,7 @@ from slicer.toolpath.linking import Lifter
 from slicer.toolpath.results import ComponentResult, Waypoints
 from slicer.toolpath.surface import boundary_edges
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
+from slicer.toolpath.tip_line import tip_line
 from slicer.toolpath.volume import VolumeMatch, match_volume, required_volume
 from slicer.toolpath.width_measure import MeasuredWidth, measure_width
 
@@ -144,11 +145,11 @@ def _component_toolpath_unsafe(
         return replace(built, waypoints=replace(wp, speed=speed, width=width),
                        flow=built.flow * flow)
 
-    def centre_match(lines: SurfaceLines) -> VolumeMatch[Built]:
+    def centre_match(lines: SurfaceLines, scaled: bool = True) -> VolumeMatch[Built]:
         """One line along a band too narrow (or too wide) for W: its width is scaled to the
-        band by the nozzle speed, point by point with ``pitch_width`` (``centre_scale``),
-        then as a whole to the volume (``fit_flow``)."""
-        scale = surf.centre_scale(comp.w_mean) if cfg.pitch_width else None
+        band by the nozzle speed, point by point with ``pitch_width`` (``centre_scale``;
+        not ``scaled``: no such band), then as a whole to the volume (``fit_flow``)."""
+        scale = surf.centre_scale(comp.w_mean) if cfg.pitch_width and scaled else None
         # medial lines meet at junctions: a connector from one to the next would run along
         # a third, printing it twice; they are joined by travel moves
         join = None if surf.geometry.loops == 2 else 0.0
@@ -252,7 +253,15 @@ def _component_toolpath_unsafe(
         if centre.n_lines:
             options.append((centre_match(centre), Pattern.CONTOUR, ComponentFallback.CENTRE_LINE))
         match, used, fallback = min(options, key=lambda o: abs(o[0].rel_error))
-    if abs(match.rel_error) > FLOW_FIT_ABOVE and fallback != ComponentFallback.CENTRE_LINE:
+    if match.volume <= 0 and required > 0:
+        # nothing printed: a tip or sliver smaller than any line of its pattern (a disc
+        # about one width across) gets one line across it, its width fitted to the volume
+        tip = tip_line(deformed, comp.faces, comp.w_mean)
+        if tip.n_lines:
+            match = centre_match(tip, scaled=False)
+            used, fallback = Pattern.CONTOUR, ComponentFallback.TIP
+    if (abs(match.rel_error) > FLOW_FIT_ABOVE
+            and fallback not in (ComponentFallback.CENTRE_LINE, ComponentFallback.TIP)):
         # The line count is discrete (a band of 1.7 W holds 2 lines, not 1.7): where no
         # spacing matches the volume, the flow per length does.
         fitted = fit_flow(match.result)

@@ -89,6 +89,21 @@ def test_too_much_ink_at_the_narrowest_width_names_thin_walls() -> None:
     assert "see toolpath.per_layer" in note
 
 
+def test_walls_printed_thicker_than_the_model_are_noted_with_their_layers() -> None:
+    # thin_walls = "thicken": the tube at 40 mm printed anyway
+    thin = {"excess_share": 0.45, "limit": 0.01, "wall_mm": 0.58, "line_mm": 1.15,
+            "layers": [[1, 9.0], [6, 8.1]], "fits_at_size_mm": 100.0}
+    (note,) = job_notes(_report(volume_error=0.45, too_thin=thin))
+    assert "walls about 0.58 mm thick print at the narrowest line (1.15 mm)" in note
+    assert "2 layer(s) (1-6)" in note and "--scale-to 100" in note
+    too_big = dict(thin, too_big="265 mm tall, it would stand out of the gel (240 mm)")
+    (note,) = job_notes(_report(volume_error=0.45, too_thin=too_big))
+    assert note.endswith("fix: a profile with a finer nozzle (at --scale-to 100, 265 mm tall, "
+                         "it would stand out of the gel (240 mm))")
+    small = dict(thin, excess_share=0.004)
+    assert job_notes(_report(too_thin=small)) == []
+
+
 def test_direction_jumps_get_a_note_with_what_the_planners_bend_test_found() -> None:
     jumps = {"downward": 0, "jumps": 7, "max_jump_deg": 48.2, "jump_layers": [3, 9]}
     (note,) = job_notes(_report(printing_direction=jumps))
