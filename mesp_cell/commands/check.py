@@ -57,6 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from slicer.extrusion import load_profile
     from slicer.mesh_io import load_surface
     from slicer.repair import load_repaired
+    from slicer.toolpath.thin_features import THINNEST
 
     start = time.perf_counter()
     job = load_job(args.job)
@@ -71,7 +72,8 @@ def run(args: argparse.Namespace) -> int:
     if args.critical:
         overrides["slicing"] = {"critical": tuple(args.critical)}
     job = job.with_overrides(**overrides)
-    width = float(load_profile(job.extrusion.profile).width(job.slicing.layer_height_mm))
+    line = load_profile(job.extrusion.profile).width(job.slicing.layer_height_mm)
+    width = float(THINNEST * line)  # the narrowest line the toolpath lays
     cell = load_cell(args.cell)
     # any size is read: a part of 8 m or 8 um is what the units finding is for
     units = replace(job.model, max_size_mm=1e12, min_size_mm=1e-12)
