@@ -30,6 +30,7 @@ from planner.cell import CellConfig
 from planner.continuity import SWING_TOL_MM, subdivide
 from planner.entry import safe_heights, safe_move
 from planner.nozzle_axis import alpha_of
+from planner.move_axis import ease_moves
 from planner.orientation import Orientation, choose
 from planner.placement import Placement, bbox, choose_placement, fit_gel, model_transform
 from planner.plan_report import (
@@ -55,6 +56,7 @@ from planner.status import MESSAGES, Cause, PlanStatus, TimingStatus
 from planner.timing import (
     Timing,
     angular_rates,
+    junctions,
     path_parameter,
     task_rates,
     time_law,
@@ -150,7 +152,7 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
     the stage names (a re-plan's stages are told apart from the first plan's)."""
     cell = reach.cell
     with timer.stage("resample" + tag):
-        samples = resample(toolpath, placement.model_T, cell)
+        samples = ease_moves(resample(toolpath, placement.model_T, cell))
     with timer.stage("upright" + tag):
         up = upright(reach, samples.tcp, samples.normal, samples.tangent, samples.extrude,
                      samples.arrive)
@@ -177,9 +179,12 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
         # entry and exit: joint rates of the sampled joint path; the toolpath: DLS rates
         dq = np.gradient(q[keep], s, axis=0)
         main = part[keep] == 1
-        omega = angular_rates(T_tcp[keep][main, :3, :3], s[main])
+        # where deposition stops and starts, rates from the depositing side (``junctions``)
+        side = np.zeros(int(keep.sum()), dtype=np.int8)
+        side[main] = junctions(samples.extrude[keep][main])
+        omega = angular_rates(T_tcp[keep][main, :3, :3], s[main], side[main])
         dq[main] = task_rates(q[keep][main], tcp[keep][main], axis[keep][main], omega, s[main],
-                              reach.tool_m, cell.planning.damping)
+                              reach.tool_m, cell.planning.damping, side=side[main])
         # at rest where the toolpath begins and ends and at the corners of entry and exit
         stop = np.zeros(len(q), dtype=bool)
         stop[np.flatnonzero(part == 1)[[0, -1]]] = True
@@ -189,7 +194,7 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
         amax = np.radians(cell.robot.max_acceleration_deg_s2)
         timing = expand_timing(
             time_law(q[keep], dq, tcp[keep], s, samples.speed[keep], vmax, amax,
-                     stop=stop[keep]), keep)
+                     stop=stop[keep], side=side), keep)
     with timer.stage("report" + tag):
         alpha = np.degrees(alpha_of(axis, samples.tangent))
         traj = Trajectory(
