@@ -24,6 +24,7 @@ import numpy as np
 
 from core.errors import InputError
 from core.progress import Progress, StageTimer
+from core.tolerance import tol
 from core.stages import Toolpath
 from planner import kinematics as kin
 from planner.cell import CellConfig
@@ -62,6 +63,7 @@ from planner.timing import (
     time_law,
 )
 from planner.trajectory import Trajectory
+from planner.turn_relief import relieve_turns
 from planner.upright import upright
 from planner.verify import verify
 
@@ -152,7 +154,8 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
     the stage names (a re-plan's stages are told apart from the first plan's)."""
     cell = reach.cell
     with timer.stage("resample" + tag):
-        samples = ease_moves(resample(toolpath, placement.model_T, cell))
+        samples, relieved = relieve_turns(resample(toolpath, placement.model_T, cell), cell)
+        samples = ease_moves(samples)
     with timer.stage("upright" + tag):
         up = upright(reach, samples.tcp, samples.normal, samples.tangent, samples.extrude,
                      samples.arrive)
@@ -207,6 +210,8 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
                              unreached, timer.seconds)
         report["normals_repaired"] = int(repaired.sum())
         report["normals_smoothed_deg"] = stats(np.degrees(smoothed))
+        report["turn_relief_deg"] = {**stats(np.degrees(relieved)),
+                                     "samples": int(np.sum(relieved > tol.still))}
         report["gel_fill_mm"] = cell.tank.gel_fill_mm
         report["continuity"] = split
         report["upright"] = upright_report(up, orient, part == 1)
