@@ -1,4 +1,4 @@
-"""The printing direction on a move between two paths, eased from one path's end to the next's start.
+"""The printing direction on a move between paths, eased from one path's end to the next's start.
 
 Why: a move deposits nothing, so its nozzle axis need not follow the layer; but the slicer's
 move waypoints carry their layer normals, and the normals are smoothed per path, so the
@@ -10,8 +10,9 @@ strictly between the last depositing sample of a path and the first of the next 
 spherical interpolation of those two directions, with the smootherstep
 e(u) = 6u^5 - 15u^4 + 10u^3 of the arc length fraction u, held for SETTLE_MM at either
 end: no turn rate and no turn acceleration where deposition stops and starts, the whole turn
-in the middle of the move, where the speed is not the toolpath's. Depositing samples keep their directions; the
-orientation stage checks every sample as before (reach, clearance, alpha where depositing).
+in the middle of the move, where the speed is not the toolpath's. Depositing samples keep
+their directions; the orientation stage checks every sample as before (reach, clearance,
+alpha where depositing).
 """
 
 from __future__ import annotations

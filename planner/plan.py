@@ -3,11 +3,14 @@
 Stages: normals (the slicer's repair of single-waypoint spikes, ``slicer.normals``, then the
 bounded smoothing along each path, ``planner.path_smoothing``), placement (search the model's
 place in the tank),
-resample (insert samples on long segments, ``planner.samples``), upright (turn printing
+resample (insert samples on long segments, ``planner.samples``; relax fast turns of the
+printing direction within alpha's band, ``planner.turn_relief``; ease the direction on moves
+between paths, ``planner.move_axis``), upright (turn printing
 directions towards vertical where the wrist would near the base axis), orientation (spin and
 alpha per sample), continuity (insert samples where a step in joint space would swing the tip
 off the path), entry (into and out of the gel along the nozzle axis), velocity (DLS joint
-rates), timing (time law within joint limits), report (``planner.plan_report``), verify (the
+rates; one-sided where deposition stops and starts, ``path_derivatives``), timing (time law
+within joint limits), report (``planner.plan_report``), verify (the
 executed trajectory against every limit: ``planner.verify``; the status is ok only if all
 hold). Where the plan is not ok at the searched placement (a blocked entry or exit, a waypoint
 the search's sample missed, a broken limit), the stages after it run again at the search's
@@ -24,15 +27,16 @@ import numpy as np
 
 from core.errors import InputError
 from core.progress import Progress, StageTimer
-from core.tolerance import tol
 from core.stages import Toolpath
+from core.tolerance import tol
 from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.continuity import SWING_TOL_MM, subdivide
 from planner.entry import safe_heights, safe_move
-from planner.nozzle_axis import alpha_of
 from planner.move_axis import ease_moves
+from planner.nozzle_axis import alpha_of
 from planner.orientation import Orientation, choose
+from planner.path_derivatives import junctions
 from planner.placement import Placement, bbox, choose_placement, fit_gel, model_transform
 from planner.plan_report import (
     between_status,
@@ -57,7 +61,6 @@ from planner.status import MESSAGES, Cause, PlanStatus, TimingStatus
 from planner.timing import (
     Timing,
     angular_rates,
-    junctions,
     path_parameter,
     task_rates,
     time_law,

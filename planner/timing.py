@@ -21,6 +21,7 @@ import numpy as np
 
 from core.tolerance import tol
 from planner import kinematics as kin
+from planner.path_derivatives import neighbours, window_derivative
 from planner.status import TimingStatus
 
 
@@ -63,8 +64,9 @@ def task_rates(
         tool_m: (4, 4) float64, m, tool transform (flange -> tip).
         damping: float, largest DLS damping (m-scaled), applied as the manipulator nears a
             singularity.
-        side: (M,) int8 or None, ``junctions``: -1 / +1 where the TCP velocity is taken from
-            the arriving / leaving step alone (``omega`` must be taken the same way).
+        side: (M,) int8 or None, ``path_derivatives.junctions``: -1 / +1 where the TCP
+            velocity is taken from the arriving / leaving step alone (``omega`` must be taken
+            the same way).
     """
     M = len(q)
     out = np.empty((M, 6))
@@ -72,7 +74,7 @@ def task_rates(
     # and at junctions)
     dp = np.gradient(tcp_mm / 1000.0, s, axis=0) if M > 1 else np.zeros((M, 3))  # m/mm
     if side is not None and M > 1:
-        nxt, prv = _neighbours(M, side)
+        nxt, prv = neighbours(M, side)
         one = np.flatnonzero(side != 0)
         dp[one] = (tcp_mm[nxt[one]] - tcp_mm[prv[one]]) / 1000.0 \
             / (s[nxt[one]] - s[prv[one]])[:, None]
@@ -118,37 +120,6 @@ def task_rates(
     return out
 
 
-def junctions(extrude: np.ndarray) -> np.ndarray:
-    """(M,) int8: -1 where deposition stops (the arriving step deposits, the leaving one does
-    not), +1 where it starts, 0 elsewhere.
-
-    A move between two paths turns the nozzle and its joints at rates that have nothing to do
-    with the depositing steps on either side; the joint rates there are a kink of the joint
-    path. Rates at a junction are taken from its depositing side alone, and the time law's
-    curvature window does not reach across it: the discrete acceleration check of the step
-    after (or before) still holds the kink to the joints' limits, without slowing the
-    depositing steps that only neighbour it.
-    """
-    ex = np.asarray(extrude, dtype=bool)
-    side = np.zeros(len(ex), dtype=np.int8)
-    if len(ex) > 1:
-        side[1:][ex[:-1] & ~ex[1:]] = -1
-        side[1:][~ex[:-1] & ex[1:]] = 1
-    return side
-
-
-def _neighbours(M: int, side: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
-    """(next, previous) sample (M,), (M,) of each difference: central, one-sided at the ends
-    and where ``side`` says (-1 the arriving step, +1 the leaving one)."""
-    k = np.arange(M)
-    nxt = np.minimum(k + 1, M - 1)
-    prv = np.maximum(k - 1, 0)
-    if side is not None:
-        nxt = np.where(side < 0, k, nxt)
-        prv = np.where(side > 0, k, prv)
-    return nxt, prv
-
-
 def angular_rates(R: np.ndarray, s: np.ndarray | None = None,
                   side: np.ndarray | None = None) -> np.ndarray:
     """Angular velocity along the path (M, 3), base frame, of orientations R (M, 3, 3).
@@ -160,7 +131,7 @@ def angular_rates(R: np.ndarray, s: np.ndarray | None = None,
     M = len(R)
     if M < 2:
         return np.zeros((M, 3))
-    nxt, prv = _neighbours(M, side)
+    nxt, prv = neighbours(M, side)
     W = R[nxt] @ np.swapaxes(R[prv], 1, 2)
     steps = (nxt - prv).astype(float) if s is None else s[nxt] - s[prv]
     cos = np.clip((np.trace(W, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
@@ -200,39 +171,6 @@ MIN_ACC = 1e-6  # rad/s^2, the acceleration a step between two rests is given at
 # one sample (a speed profile jumping 4 -> 1.3 -> 2.5 -> 1.2 mm/s on a torus). The discrete
 # acceleration check of ``time_law`` still holds every step to the limit.
 CURVATURE_WINDOW_MM = 0.5
-
-
-def window_derivative(y: np.ndarray, s: np.ndarray, h: float,
-                      side: np.ndarray | None = None) -> np.ndarray:
-    """d y / d s (M, k) as the difference over [s - h, s + h] (clipped to the path's ends,
-    and to the junctions of ``side``: a window does not reach across one).
-
-    Args:
-        y: (M, k) float64, values at the samples. s: (M,) float64, increasing.
-        h: float, half window in units of ``s``; 0 gives ``np.gradient``.
-        side: (M,) int8 or None, ``junctions``: a junction's own window lies on its -1
-            (arriving) or +1 (leaving) side.
-    """
-    if h <= 0 or len(s) < 2:
-        return np.gradient(y, s, axis=0) if len(s) > 1 else np.zeros_like(y)
-    lo = np.maximum(s - h, s[0])
-    hi = np.minimum(s + h, s[-1])
-    if side is not None and np.any(side != 0):
-        k = np.arange(len(s))
-        # the last junction at or before each sample (itself only if it leaves: +1), and the
-        # first at or after it (itself only if it arrives: -1)
-        prev_cut = np.maximum.accumulate(np.where(side != 0, k, -1))
-        prev_cut = np.where(side < 0, np.r_[-1, prev_cut[:-1]], prev_cut)
-        next_cut = np.minimum.accumulate(np.where(side != 0, k, len(s))[::-1])[::-1]
-        next_cut = np.where(side > 0, np.r_[next_cut[1:], len(s)], next_cut)
-        lo = np.where(prev_cut >= 0, np.maximum(lo, s[np.maximum(prev_cut, 0)]), lo)
-        hi = np.where(next_cut < len(s), np.minimum(hi, s[np.minimum(next_cut, len(s) - 1)]),
-                      hi)
-    span = np.maximum(hi - lo, tol.zero)
-    out = np.empty_like(y)
-    for j in range(y.shape[1]):  # a loop over the columns (six joints), not the samples
-        out[:, j] = (np.interp(hi, s, y[:, j]) - np.interp(lo, s, y[:, j])) / span
-    return out
 
 
 def _scan_limit(cap: np.ndarray, inc: np.ndarray) -> np.ndarray:

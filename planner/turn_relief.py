@@ -1,4 +1,4 @@
-"""Where the printing direction turns fast along a path, the nozzle turns less: alpha's freedom used.
+"""Where the printing direction turns fast along a path, the nozzle turns less: alpha's band used.
 
 Why: the flange sits 460 mm up the nozzle axis, so every degree the axis turns sweeps the
 flange 8 mm; where a layer wraps a tight curve (a lying tube's underside: the direction turns

@@ -8,8 +8,9 @@ import numpy as np
 
 from core.stages import Toolpath
 from planner.cell import CellConfig
+from planner.path_derivatives import window_derivative
 from planner.plan import PlanResult, plan
-from planner.timing import _scan_limit, window_derivative
+from planner.timing import _scan_limit
 
 
 def test_scan_limit_equals_the_sequential_recursion() -> None:
@@ -144,15 +145,6 @@ def test_joint_path_curvature_is_taken_over_a_window_not_between_close_samples()
     assert np.allclose(window_derivative(q, s, 0.5)[inner, 0], 2 * s[inner], atol=0.13)
 
 
-def test_junctions_mark_where_deposition_stops_and_starts() -> None:
-    from planner.timing import junctions
-
-    ex = np.array([1, 1, 0, 0, 1, 1, 1, 0], dtype=bool)
-    # step 1 -> 2 deposits, 2 -> 3 does not: stop at 2; start at 4 (step 4 -> 5 deposits)
-    assert junctions(ex).tolist() == [0, 0, -1, 0, 1, 0, 0, -1]
-    assert not junctions(np.ones(5, dtype=bool)).any()
-
-
 def test_rates_at_a_junction_come_from_its_depositing_side() -> None:
     from planner.timing import angular_rates
 
@@ -169,22 +161,3 @@ def test_rates_at_a_junction_come_from_its_depositing_side() -> None:
     assert central[5, 2] > 0.4  # the central difference sees half the move's turn
     assert np.allclose(one[5], 0.0)  # the arriving (depositing) step turns nothing
     assert np.allclose(one[np.r_[0:5, 6:10]], central[np.r_[0:5, 6:10]])
-
-
-def test_the_curvature_window_does_not_reach_across_a_junction() -> None:
-    # q' steps from 0 to 1 right after sample 5, where deposition stops: the window of a
-    # depositing sample before it sees none of the step, the samples after it all of it
-    s = np.arange(0.0, 10.01, 0.25)
-    y = (s > 5.0).astype(float)[:, None]
-    side = np.zeros(len(s), dtype=np.int8)
-    k = int(np.flatnonzero(s == 5.0)[0])
-    side[k] = -1
-    plain = window_derivative(y, s, 0.5)
-    cut = window_derivative(y, s, 0.5, side)
-    before = s <= 5.0
-    assert plain[before].max() > 0.4  # the window across the stop spreads the step back
-    assert np.allclose(cut[before], 0.0)
-    # a start (+1) cuts the same way from the other side
-    side[k] = 1
-    y2 = (s >= 5.0).astype(float)[:, None]
-    assert np.allclose(window_derivative(y2, s, 0.5, side)[s >= 5.0], 0.0)
