@@ -3,11 +3,14 @@
 Stages: normals (the slicer's repair of single-waypoint spikes, ``slicer.normals``, then the
 bounded smoothing along each path, ``planner.path_smoothing``), placement (search the model's
 place in the tank),
-resample (insert samples on long segments, ``planner.samples``), upright (turn printing
+resample (insert samples on long segments, ``planner.samples``; relax fast turns of the
+printing direction within alpha's band, ``planner.turn_relief``; ease the direction on moves
+between paths, ``planner.move_axis``), upright (turn printing
 directions towards vertical where the wrist would near the base axis), orientation (spin and
 alpha per sample), continuity (insert samples where a step in joint space would swing the tip
 off the path), entry (into and out of the gel along the nozzle axis), velocity (DLS joint
-rates), timing (time law within joint limits), report (``planner.plan_report``), verify (the
+rates; one-sided where deposition stops and starts, ``path_derivatives``), timing (time law
+within joint limits), report (``planner.plan_report``), verify (the
 executed trajectory against every limit: ``planner.verify``; the status is ok only if all
 hold). Where the plan is not ok at the searched placement (a blocked entry or exit, a waypoint
 the search's sample missed, a broken limit), the stages after it run again at the search's
@@ -25,12 +28,15 @@ import numpy as np
 from core.errors import InputError
 from core.progress import Progress, StageTimer
 from core.stages import Toolpath
+from core.tolerance import tol
 from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.continuity import SWING_TOL_MM, subdivide
 from planner.entry import safe_heights, safe_move
+from planner.move_axis import ease_moves
 from planner.nozzle_axis import alpha_of
 from planner.orientation import Orientation, choose
+from planner.path_derivatives import junctions
 from planner.placement import Placement, bbox, choose_placement, fit_gel, model_transform
 from planner.plan_report import (
     between_status,
@@ -60,6 +66,7 @@ from planner.timing import (
     time_law,
 )
 from planner.trajectory import Trajectory
+from planner.turn_relief import relieve_turns
 from planner.upright import upright
 from planner.verify import verify
 
@@ -150,7 +157,8 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
     the stage names (a re-plan's stages are told apart from the first plan's)."""
     cell = reach.cell
     with timer.stage("resample" + tag):
-        samples = resample(toolpath, placement.model_T, cell)
+        samples, relieved = relieve_turns(resample(toolpath, placement.model_T, cell), cell)
+        samples = ease_moves(samples)
     with timer.stage("upright" + tag):
         up = upright(reach, samples.tcp, samples.normal, samples.tangent, samples.extrude,
                      samples.arrive)
@@ -177,9 +185,12 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
         # entry and exit: joint rates of the sampled joint path; the toolpath: DLS rates
         dq = np.gradient(q[keep], s, axis=0)
         main = part[keep] == 1
-        omega = angular_rates(T_tcp[keep][main, :3, :3], s[main])
+        # where deposition stops and starts, rates from the depositing side (``junctions``)
+        side = np.zeros(int(keep.sum()), dtype=np.int8)
+        side[main] = junctions(samples.extrude[keep][main])
+        omega = angular_rates(T_tcp[keep][main, :3, :3], s[main], side[main])
         dq[main] = task_rates(q[keep][main], tcp[keep][main], axis[keep][main], omega, s[main],
-                              reach.tool_m, cell.planning.damping)
+                              reach.tool_m, cell.planning.damping, side=side[main])
         # at rest where the toolpath begins and ends and at the corners of entry and exit
         stop = np.zeros(len(q), dtype=bool)
         stop[np.flatnonzero(part == 1)[[0, -1]]] = True
@@ -189,7 +200,7 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
         amax = np.radians(cell.robot.max_acceleration_deg_s2)
         timing = expand_timing(
             time_law(q[keep], dq, tcp[keep], s, samples.speed[keep], vmax, amax,
-                     stop=stop[keep]), keep)
+                     stop=stop[keep], side=side), keep)
     with timer.stage("report" + tag):
         alpha = np.degrees(alpha_of(axis, samples.tangent))
         traj = Trajectory(
@@ -202,6 +213,8 @@ def _plan_placed(toolpath: Toolpath, reach: Reach, placement: Placement, timer: 
                              unreached, timer.seconds)
         report["normals_repaired"] = int(repaired.sum())
         report["normals_smoothed_deg"] = stats(np.degrees(smoothed))
+        report["turn_relief_deg"] = {**stats(np.degrees(relieved)),
+                                     "samples": int(np.sum(relieved > tol.still))}
         report["gel_fill_mm"] = cell.tank.gel_fill_mm
         report["continuity"] = split
         report["upright"] = upright_report(up, orient, part == 1)

@@ -21,6 +21,7 @@ import numpy as np
 
 from core.tolerance import tol
 from planner import kinematics as kin
+from planner.path_derivatives import neighbours, window_derivative
 from planner.status import TimingStatus
 
 
@@ -49,7 +50,7 @@ class Timing:
 
 def task_rates(
     q: np.ndarray, tcp_mm: np.ndarray, axis: np.ndarray, omega: np.ndarray, s: np.ndarray,
-    tool_m: np.ndarray, damping: float, chunk: int = 8192,
+    tool_m: np.ndarray, damping: float, chunk: int = 8192, side: np.ndarray | None = None,
 ) -> np.ndarray:
     """Joint rates along the path, dq/ds (M, 6) rad/mm, by DLS with a null-space spin term.
 
@@ -63,11 +64,20 @@ def task_rates(
         tool_m: (4, 4) float64, m, tool transform (flange -> tip).
         damping: float, largest DLS damping (m-scaled), applied as the manipulator nears a
             singularity.
+        side: (M,) int8 or None, ``path_derivatives.junctions``: -1 / +1 where the TCP
+            velocity is taken from the arriving / leaving step alone (``omega`` must be taken
+            the same way).
     """
     M = len(q)
     out = np.empty((M, 6))
-    # path derivatives by central differences over the sample index (one-sided at the ends)
+    # path derivatives by central differences over the sample index (one-sided at the ends
+    # and at junctions)
     dp = np.gradient(tcp_mm / 1000.0, s, axis=0) if M > 1 else np.zeros((M, 3))  # m/mm
+    if side is not None and M > 1:
+        nxt, prv = neighbours(M, side)
+        one = np.flatnonzero(side != 0)
+        dp[one] = (tcp_mm[nxt[one]] - tcp_mm[prv[one]]) / 1000.0 \
+            / (s[nxt[one]] - s[prv[one]])[:, None]
     for start in range(0, M, chunk):
         sl = slice(start, start + chunk)
         J = kin.jacobian(q[sl], tool_m)  # (m, 6, 6)
@@ -110,17 +120,18 @@ def task_rates(
     return out
 
 
-def angular_rates(R: np.ndarray, s: np.ndarray | None = None) -> np.ndarray:
+def angular_rates(R: np.ndarray, s: np.ndarray | None = None,
+                  side: np.ndarray | None = None) -> np.ndarray:
     """Angular velocity along the path (M, 3), base frame, of orientations R (M, 3, 3).
 
     Central differences of the rotation: omega_k = log(R_{k+1} R_{k-1}^T) / (s_{k+1} - s_{k-1})
-    (one-sided at the ends); rad per unit of ``s`` (M,), or per sample if ``s`` is None.
+    (one-sided at the ends and where ``side`` (M,) int8 says: ``junctions``); rad per unit of
+    ``s`` (M,), or per sample if ``s`` is None.
     """
     M = len(R)
     if M < 2:
         return np.zeros((M, 3))
-    nxt = np.minimum(np.arange(M) + 1, M - 1)
-    prv = np.maximum(np.arange(M) - 1, 0)
+    nxt, prv = neighbours(M, side)
     W = R[nxt] @ np.swapaxes(R[prv], 1, 2)
     steps = (nxt - prv).astype(float) if s is None else s[nxt] - s[prv]
     cos = np.clip((np.trace(W, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
@@ -162,24 +173,6 @@ MIN_ACC = 1e-6  # rad/s^2, the acceleration a step between two rests is given at
 CURVATURE_WINDOW_MM = 0.5
 
 
-def window_derivative(y: np.ndarray, s: np.ndarray, h: float) -> np.ndarray:
-    """d y / d s (M, k) as the difference over [s - h, s + h] (clipped to the path's ends).
-
-    Args:
-        y: (M, k) float64, values at the samples. s: (M,) float64, increasing.
-        h: float, half window in units of ``s``; 0 gives ``np.gradient``.
-    """
-    if h <= 0 or len(s) < 2:
-        return np.gradient(y, s, axis=0) if len(s) > 1 else np.zeros_like(y)
-    lo = np.maximum(s - h, s[0])
-    hi = np.minimum(s + h, s[-1])
-    span = np.maximum(hi - lo, tol.zero)
-    out = np.empty_like(y)
-    for j in range(y.shape[1]):  # a loop over the columns (six joints), not the samples
-        out[:, j] = (np.interp(hi, s, y[:, j]) - np.interp(lo, s, y[:, j])) / span
-    return out
-
-
 def _scan_limit(cap: np.ndarray, inc: np.ndarray) -> np.ndarray:
     """x_k = min(cap_k, x_{k-1} + inc_{k-1}) for all k at once (x_0 = cap_0)."""
     S = np.concatenate([[0.0], np.cumsum(inc)])
@@ -189,6 +182,7 @@ def _scan_limit(cap: np.ndarray, inc: np.ndarray) -> np.ndarray:
 def time_law(
     q: np.ndarray, dq: np.ndarray, tcp_mm: np.ndarray, s: np.ndarray, target: np.ndarray,
     vmax: np.ndarray, amax: np.ndarray, max_iter: int = 30, stop: np.ndarray | None = None,
+    side: np.ndarray | None = None,
 ) -> Timing:
     """Fastest time law within limits and the toolpath speed (see module docstring).
 
@@ -200,6 +194,8 @@ def time_law(
         stop: (M,) bool or None, samples where the motion comes to rest (besides the first
             and the last): the corners between a joint-space move, a plunge along the nozzle
             axis and the toolpath, where the joint velocity direction jumps.
+        side: (M,) int8 or None, ``junctions`` (where deposition stops and starts): ``dq``
+            there is one-sided, and the curvature window does not reach across them.
     """
     M = len(q)
     if M < 2:
@@ -217,7 +213,7 @@ def time_law(
                   float(np.max(2.0 * np.sqrt(step / amax))), MIN_DT)
         z = np.zeros((2, 6))
         return Timing(np.array([0.0, dt1]), z, np.zeros(2), target, np.zeros(2, bool), 0, "ok")
-    ddq = window_derivative(dq, s, CURVATURE_WINDOW_MM)  # rad/mm^2, see the constant
+    ddq = window_derivative(dq, s, CURVATURE_WINDOW_MM, side)  # rad/mm^2, the constant
     ds = np.diff(s)
     safety = 0.98
     # velocity caps on x = sdot^2 (mm/s)^2: TCP speed and joint speed

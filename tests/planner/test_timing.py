@@ -8,8 +8,9 @@ import numpy as np
 
 from core.stages import Toolpath
 from planner.cell import CellConfig
+from planner.path_derivatives import window_derivative
 from planner.plan import PlanResult, plan
-from planner.timing import _scan_limit, window_derivative
+from planner.timing import _scan_limit
 
 
 def test_scan_limit_equals_the_sequential_recursion() -> None:
@@ -142,3 +143,21 @@ def test_joint_path_curvature_is_taken_over_a_window_not_between_close_samples()
     q = (s**2)[:, None]
     inner = (s >= 0.5) & (s <= 9.5)
     assert np.allclose(window_derivative(q, s, 0.5)[inner, 0], 2 * s[inner], atol=0.13)
+
+
+def test_rates_at_a_junction_come_from_its_depositing_side() -> None:
+    from planner.timing import angular_rates
+
+    # a straight line, then a turn about z at 1 rad/mm from sample 5 on (a move)
+    s = np.arange(10.0)
+    ang = np.where(s > 5, s - 5, 0.0)
+    c, sn = np.cos(ang), np.sin(ang)
+    R = np.zeros((10, 3, 3))
+    R[:, 0, 0], R[:, 0, 1], R[:, 1, 0], R[:, 1, 1], R[:, 2, 2] = c, -sn, sn, c, 1.0
+    side = np.zeros(10, dtype=np.int8)
+    side[5] = -1  # deposition stops at sample 5
+    central = angular_rates(R, s)
+    one = angular_rates(R, s, side)
+    assert central[5, 2] > 0.4  # the central difference sees half the move's turn
+    assert np.allclose(one[5], 0.0)  # the arriving (depositing) step turns nothing
+    assert np.allclose(one[np.r_[0:5, 6:10]], central[np.r_[0:5, 6:10]])
