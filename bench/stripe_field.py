@@ -6,7 +6,10 @@ enough) is printed again with ``toolpath.stripe_field`` 'across' (the default) a
 pattern (``toolpath.coverage``), the width error p90 per pattern and the chosen layers'
 volume error (deposited / integral of H - 1). Usage:
 
-    .venv/bin/python bench/stripe_field.py JOBDIR ... [--step 3] [--out FILE.json]
+    .venv/bin/python bench/stripe_field.py JOBDIR ... [--step 3] [--fields across]
+        [--out FILE.json]
+
+(run it with PYTHONPATH at another tree to measure that tree's stripes on the same layers).
 """
 
 from __future__ import annotations
@@ -54,6 +57,7 @@ def measure(job_dir: Path, step: int, field: str) -> dict[str, Any]:
         cov = coverage[name]
         row[name] = {"gap": cov["gap"], "overlap": cov["overlap"],
                      "width_p90": float(np.percentile(flat, 90)) if len(flat) else None}
+    row["stripe_starts"] = sum(c.extrusion_starts for c in comps if c.pattern == 1)
     required = sum(c.required_mm3 for c in comps)
     row["volume_error"] = sum(c.deposited_mm3 for c in comps) / required - 1.0 if required else None
     row["seconds"] = time.perf_counter() - start
@@ -68,18 +72,21 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("jobs", nargs="+", type=Path, help="sliced job directories")
     ap.add_argument("--step", type=int, default=3, help="every STEP-th layer")
+    ap.add_argument("--fields", nargs="+", choices=FIELDS, default=list(FIELDS),
+                    help="stripe fields to run (default: both)")
     ap.add_argument("--out", type=Path, help="write every number as JSON")
     args = ap.parse_args()
     out: dict[str, Any] = {}
     for job_dir in args.jobs:
-        for field in FIELDS:
+        for field in args.fields:
             row = measure(job_dir, args.step, field)
             out[f"{job_dir.name}:{field}"] = row
             c, s = row["contour"], row["stripe"]
             print(f"{job_dir.name}:{field:9s} layers {row['layers']:3d}  contour "
                   f"{_pct(c['gap'])}/{_pct(c['overlap'])}  stripe {_pct(s['gap'])}/"
                   f"{_pct(s['overlap'])}  p90 {_pct(c['width_p90'])}/{_pct(s['width_p90'])}  "
-                  f"volume {_pct(row['volume_error'])}  ({row['seconds']:.0f} s)", flush=True)
+                  f"volume {_pct(row['volume_error'])}  stripe starts {row['stripe_starts']}  "
+                  f"({row['seconds']:.0f} s)", flush=True)
             if args.out:
                 args.out.write_text(json.dumps(out, indent=1))
 

@@ -24,7 +24,7 @@ from slicer.toolpath.perimeter import (
     perimeter_loop,
 )
 from slicer.toolpath.poisson_stripes import poisson_stripe_lines
-from slicer.toolpath.stripes import stripe_lines
+from slicer.toolpath.stripe_width import stripe_width_scale
 from slicer.toolpath.surface_geometry import (
     CENTRE_WIDTH_SCALE,
     Backend,
@@ -129,6 +129,11 @@ class LineSource:
         eq. 9's iso-lines fill holes in the fitting (no band there, no pitch), and not on
         stripes: their local spacing 2 pi / |grad psi| is off next to the ends
         trim_converging cuts back."""
+        if pattern == Pattern.STRIPE and self.wall_half_width == 0.0 and not self.perimeter:
+            # stripes as wide as their local spacing (``stripe_width``)
+            geo = self.geometry
+            return stripe_width_scale(geo.vertices, geo.faces, geo.stripes(spacing),
+                                      geo.distance, spacing)
         if pattern == Pattern.STRIPE and self.wall_half_width > 0.0:
             # the walls' centre lines as wide as the wall, the stripes at W
             centre = self.geometry.centre_scale(spacing)
@@ -198,8 +203,8 @@ class LineSource:
                 return merge_lines([fitted, extra], [np.arange(len(geo.faces)), hole])
             offset = min(0.5 * spacing, 0.5 * geo.max_distance)
             return contour_lines(geo.vertices, geo.faces, geo.distance, spacing, offset)
-        fn = poisson_stripe_lines if poisson else stripe_lines
-        stripes = fn(geo.vertices, geo.faces, geo.direction, spacing)
+        stripes = (poisson_stripe_lines(geo.vertices, geo.faces, geo.direction, spacing)
+                   if poisson else geo.stripes(spacing))
         if self.wall_half_width > 0.0:
             return self.narrow_walls(stripes)
         if not self.perimeter or geo.max_distance < PERIMETER_MIN_DISTANCE * spacing:
