@@ -129,9 +129,10 @@ class LineSource:
         eq. 9's iso-lines fill holes in the fitting (no band there, no pitch), and not on
         stripes: their local spacing 2 pi / |grad psi| is off next to the ends
         trim_converging cuts back."""
-        if pattern == Pattern.STRIPE and self.wall_half_width == 0.0 and not self.perimeter:
+        geo = self.geometry
+        loop = self.perimeter and geo.max_distance >= PERIMETER_MIN_DISTANCE * spacing
+        if pattern == Pattern.STRIPE and self.wall_half_width == 0.0 and not loop:
             # stripes as wide as their local spacing (``stripe_width``)
-            geo = self.geometry
             return stripe_width_scale(geo.vertices, geo.faces, geo.stripes(spacing),
                                       geo.distance, spacing)
         if pattern == Pattern.STRIPE and self.wall_half_width > 0.0:

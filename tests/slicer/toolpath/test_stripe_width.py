@@ -43,7 +43,7 @@ def test_a_fan_of_rays_is_printed_as_wide_as_it_spreads() -> None:
     v, f = _sector(6.0, 16.0, 0.5, 0.5)
     angle = np.arctan2(v[:, 1], v[:, 0])
     step = 0.15
-    lines = iso_lines(v, f, angle, np.arange(-3, 4) * step)
+    lines = iso_lines(v, f, angle, np.linspace(-3 * step, 3 * step, 7))
     spacing = 1.6
     dist = geodesic.boundary_distance(v, f)
     scale = stripe_width_scale(v, f, lines, dist, spacing)
