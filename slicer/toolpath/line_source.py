@@ -121,14 +121,17 @@ class LineSource:
 
     def width_scale(self, pattern: int, spacing: float) -> NDArray[np.float64] | None:
         """(n,) float64, the band's local pitch over ``spacing`` (within
-        CENTRE_WIDTH_SCALE) for contours fitted to a band, None for any other lines.
+        CENTRE_WIDTH_SCALE) for contours fitted to a band, the stripes' spacing to their
+        neighbours over ``spacing`` (``stripe_width``) for stripes without a perimeter
+        loop, None for any other lines.
 
         A band of 4.6 spacings holds 5 lines at 0.92 spacings (``fitted_contours``): the
         lines printed at W x this ratio (the nozzle speed sets it, W = C / (H v)) abut
         instead of overlapping by 8 %, and the band gets the ink its area needs. Not where
-        eq. 9's iso-lines fill holes in the fitting (no band there, no pitch), and not on
-        stripes: their local spacing 2 pi / |grad psi| is off next to the ends
-        trim_converging cuts back."""
+        eq. 9's iso-lines fill holes in the fitting (no band there, no pitch). Stripes
+        fanning out across a disc spread up to 2x between branch points: each is printed
+        as wide as the gaps to the stripes beside it (measured between the lines, not the
+        field's 2 pi / |grad psi|, which is off next to the ends trim_converging cuts)."""
         geo = self.geometry
         loop = self.perimeter and geo.max_distance >= PERIMETER_MIN_DISTANCE * spacing
         if pattern == Pattern.STRIPE and self.wall_half_width == 0.0 and not loop:
