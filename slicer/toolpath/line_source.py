@@ -24,7 +24,7 @@ from slicer.toolpath.perimeter import (
     perimeter_loop,
 )
 from slicer.toolpath.poisson_stripes import poisson_stripe_lines
-from slicer.toolpath.stripes import stripe_lines
+from slicer.toolpath.stripe_width import stripe_width_scale
 from slicer.toolpath.surface_geometry import (
     CENTRE_WIDTH_SCALE,
     Backend,
@@ -121,14 +121,23 @@ class LineSource:
 
     def width_scale(self, pattern: int, spacing: float) -> NDArray[np.float64] | None:
         """(n,) float64, the band's local pitch over ``spacing`` (within
-        CENTRE_WIDTH_SCALE) for contours fitted to a band, None for any other lines.
+        CENTRE_WIDTH_SCALE) for contours fitted to a band, the stripes' spacing to their
+        neighbours over ``spacing`` (``stripe_width``) for stripes without a perimeter
+        loop, None for any other lines.
 
         A band of 4.6 spacings holds 5 lines at 0.92 spacings (``fitted_contours``): the
         lines printed at W x this ratio (the nozzle speed sets it, W = C / (H v)) abut
         instead of overlapping by 8 %, and the band gets the ink its area needs. Not where
-        eq. 9's iso-lines fill holes in the fitting (no band there, no pitch), and not on
-        stripes: their local spacing 2 pi / |grad psi| is off next to the ends
-        trim_converging cuts back."""
+        eq. 9's iso-lines fill holes in the fitting (no band there, no pitch). Stripes
+        fanning out across a disc spread up to 2x between branch points: each is printed
+        as wide as the gaps to the stripes beside it (measured between the lines, not the
+        field's 2 pi / |grad psi|, which is off next to the ends trim_converging cuts)."""
+        geo = self.geometry
+        loop = self.perimeter and geo.max_distance >= PERIMETER_MIN_DISTANCE * spacing
+        if pattern == Pattern.STRIPE and self.wall_half_width == 0.0 and not loop:
+            # stripes as wide as their local spacing (``stripe_width``)
+            return stripe_width_scale(geo.vertices, geo.faces, geo.stripes(spacing),
+                                      geo.distance, spacing)
         if pattern == Pattern.STRIPE and self.wall_half_width > 0.0:
             # the walls' centre lines as wide as the wall, the stripes at W
             centre = self.geometry.centre_scale(spacing)
@@ -198,8 +207,8 @@ class LineSource:
                 return merge_lines([fitted, extra], [np.arange(len(geo.faces)), hole])
             offset = min(0.5 * spacing, 0.5 * geo.max_distance)
             return contour_lines(geo.vertices, geo.faces, geo.distance, spacing, offset)
-        fn = poisson_stripe_lines if poisson else stripe_lines
-        stripes = fn(geo.vertices, geo.faces, geo.direction, spacing)
+        stripes = (poisson_stripe_lines(geo.vertices, geo.faces, geo.direction, spacing)
+                   if poisson else geo.stripes(spacing))
         if self.wall_half_width > 0.0:
             return self.narrow_walls(stripes)
         if not self.perimeter or geo.max_distance < PERIMETER_MIN_DISTANCE * spacing:

@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from core.tolerance import tol
+from slicer.toolpath.join_crossing import JoinCrossing
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.resample import line_index
 from slicer.toolpath.splice import Splice, find_splices, spliced_points
@@ -282,14 +283,16 @@ def _shorten(partner: NDArray[np.int64], n: int, cand: list[list[int]],
 def _order_cover(lines: SurfaceLines, start_pos: NDArray[np.float64],
                  reach: NDArray[np.float64],
                  can_join: Callable[[int, int], bool] | None = None,
-                 closed_first: bool = False) -> list[Piece]:
+                 closed_first: bool = False, spacing: float | None = None) -> list[Piece]:
     """Stripes as a path cover: lines are edges between their two end nodes; joins pair
     ends (``_match_ends``: each end at most once, never closing a cycle) so that the chains
     of lines cover the component with few starts. ``can_join(point_a, point_b)`` (point
     indices of two line ends) may veto a join, e.g. one without a short on-surface
     connector. The chains are printed nearest-neighbour first (each entered at its nearer
     end; closed lines at their nearest point). ``closed_first``: a closed line (a stripe
-    layer's perimeter loop) before the chains, left next to a chain end.
+    layer's perimeter loop) before the chains, left next to a chain end. With ``spacing``
+    (mm, the lines' spacing), a join whose connector would cross another line is left out
+    (``join_crossing``).
     """
     idx = line_index(lines)
     n = lines.n_lines
@@ -308,11 +311,15 @@ def _order_cover(lines: SurfaceLines, start_pos: NDArray[np.float64],
         cand[a].append(b)
         cand[b].append(a)
         dist[(min(a, b), max(a, b))] = d
-    partner = _match_ends(
-        n, cand,
-        (lambda a, b: can_join(int(end_point[a]), int(end_point[b]))) if can_join is not None
-        else (lambda a, b: True),
-        lambda a, b: dist[(min(a, b), max(a, b))])
+    crossing = JoinCrossing(lines, spacing) if spacing is not None else None
+
+    def joinable(a: int, b: int) -> bool:
+        pa, pb = int(end_point[a]), int(end_point[b])
+        if crossing is not None and crossing.crosses(pa, pb):
+            return False
+        return can_join is None or can_join(pa, pb)
+
+    partner = _match_ends(n, cand, joinable, lambda a, b: dist[(min(a, b), max(a, b))])
     # chains: from each free end of an open line, walk line -> join -> line
     chains: list[list[Piece]] = []
     seen = np.zeros(n, dtype=bool)
@@ -394,7 +401,8 @@ def order_lines(
         start_pos: (3,) float64, mm, the nozzle position before the first line.
         level: (L,) float64, mm, per-line distance from the boundary (contours) or None
             (stripes).
-        level_step: mm, levels in the same interval [k, k + 1) * level_step form one ring.
+        level_step: mm, levels in the same interval [k, k + 1) * level_step form one ring;
+            for stripes the lines' spacing (joins crossing another line are left out).
         reach: (P,) float64, mm, per point: the longest join that still extrudes. With it,
             stripes (level None) follow ``_order_cover``; without, pure nearest neighbour.
         can_join: (point a, point b) -> bool, whether two line ends may be joined by an
@@ -405,7 +413,7 @@ def order_lines(
         The pieces in print order.
     """
     if level is None and reach is not None:
-        return _order_cover(lines, start_pos, reach, can_join, closed_first)
+        return _order_cover(lines, start_pos, reach, can_join, closed_first, level_step)
     idx = line_index(lines)
     n = lines.n_lines
     alive = idx.stop > idx.start

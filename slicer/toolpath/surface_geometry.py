@@ -22,6 +22,7 @@ from slicer.toolpath.eikonal import points_to_segments
 from slicer.toolpath.geodesic import boundary_distance, distance_from
 from slicer.toolpath.isolines import iso_lines
 from slicer.toolpath.lines import SurfaceLines, empty_lines
+from slicer.toolpath.stripes import stripe_lines
 from slicer.toolpath.surface import (
     boundary_loops,
     cotan_laplacian,
@@ -62,6 +63,7 @@ class SurfaceGeometry:
     _reach: dict[float, NDArray[np.float64]] = field(default_factory=dict, repr=False)
     _fitted: dict[float, SurfaceLines] = field(default_factory=dict, repr=False)
     _pitch: dict[float, PitchFit] = field(default_factory=dict, repr=False)
+    _stripes: dict[float, SurfaceLines] = field(default_factory=dict, repr=False)
     _smoother: list[Callable[[NDArray[np.float64]], NDArray[np.float64]]] = field(
         default_factory=list, repr=False)
 
@@ -158,6 +160,15 @@ class SurfaceGeometry:
             self._fitted.clear()
             self._fitted[spacing] = lines
         return self._fitted[spacing]
+
+    def stripes(self, spacing: float) -> SurfaceLines:
+        """Stripes along ``direction`` at ``spacing`` (``stripes.stripe_lines``): the lines
+        and the widths they print at (``stripe_width``) are both taken from them."""
+        if spacing not in self._stripes:
+            lines = stripe_lines(self.vertices, self.faces, self.direction, spacing)
+            self._stripes.clear()
+            self._stripes[spacing] = lines
+        return self._stripes[spacing]
 
     def centre_lines(self) -> SurfaceLines:
         """One line along the middle of a band with holes, where the distances from the

@@ -138,7 +138,11 @@ def test_width_follows_eq4(discs: tuple[Layers, ToolpathResult]) -> None:
     ext = tp.extrude
     # H on the flat layer is the linear field base_h + slope * x / radius
     assert np.allclose(tp.height[ext], 0.6 + 0.15 * tp.position[ext, 0] / 12.0, atol=1e-9)
-    assert np.allclose(tp.speed, PROFILE.speed_at(tp.height))
+    contour = tp.pattern == Pattern.CONTOUR
+    assert np.allclose(tp.speed[contour], PROFILE.speed_at(tp.height[contour]))
+    # stripes are printed as wide as their spacing (pitch_width): the speed scales W
+    scale = PROFILE.speed_at(tp.height) / tp.speed
+    assert np.all((scale >= 0.5 - 1e-9) & (scale <= 1.5 + 1e-9))
 
 
 def test_volume_matches_required(discs: tuple[Layers, ToolpathResult]) -> None:
@@ -635,7 +639,9 @@ def test_first_layer_beta_applies_to_layer_zero_only() -> None:
     import dataclasses
 
     beta0 = float(np.pi / 4)
-    config = JobConfig().with_overrides(toolpath={"first_layer_beta": beta0})
+    # (pitch_width off: layer 1's stripes keep W(H), not their spacing)
+    config = JobConfig().with_overrides(toolpath={"first_layer_beta": beta0,
+                                                  "pitch_width": False})
     res = compute_toolpath(disc_stack(2), config, PROFILE, measure_baselines=False, workers=1)
     tp = res.toolpath
     first = dataclasses.replace(PROFILE, beta=beta0)
