@@ -33,7 +33,7 @@ def walls_text(walls: WallThickness, width_mm: float,
     if not len(walls.thickness):
         return True, "no standing walls: the layers' lines span no wall thickness"
     thin = walls.share_below(width_mm)
-    line = f"the narrowest line ({width_mm:.2f} mm)"
+    line = f"the narrowest line of {width_mm:.2f} mm"
     if thin <= NOTE_SHARE:
         return True, (f"{100 * thin:.0f} % of the standing-wall area is thinner than {line} "
                       f"(thinnest tenth from {walls.quantile(NOTE_SHARE):.2f} mm)")

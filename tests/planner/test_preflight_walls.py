@@ -17,7 +17,7 @@ def _walls(thin_share: float, thin: float = 0.5, thick: float = 10.0) -> WallThi
 def test_a_few_thin_walls_are_fine() -> None:
     ok, text = walls_text(_walls(0.05), 2.0, lambda k: True)
     assert ok and text.startswith("5 % of the standing-wall area is thinner than the "
-                                  "narrowest line (2.00 mm)")
+                                  "narrowest line of 2.00 mm")
 
 
 def test_a_third_thin_is_said_not_refused() -> None:
