@@ -98,7 +98,7 @@ def _component_toolpath_unsafe(
     t0 = time.perf_counter()
     perimeter = cfg.stripe_perimeter and pattern == Pattern.STRIPE
     surf = LineSource.of(deformed, comp.faces, cfg.fit_bands, perimeter, cfg.boundary_distance,
-                         cfg.stripe_field)
+                         cfg.stripe_field, cfg.fit_ridge)
     surf.geometry.distance  # noqa: B018 (timed here: every line generator needs it)
     timings["distance"] = time.perf_counter() - t0
 
