@@ -25,6 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
 
 from core.tolerance import tol
 from slicer.toolpath.contours import BRANCH_ROOM, band_pitch
@@ -35,8 +36,11 @@ from slicer.toolpath.medial import medial_lines
 from slicer.toolpath.perimeter import clip_lines
 from slicer.toolpath.surface import boundary_edges, check_mesh, edge_topology, vertex_normals
 
-FLARE = 0.5  # mm of width per mm along the part: where the ray's reading grows faster, the
-# width beside it holds (a wedge opening 28 deg still reads its own)
+FLARE = 1.0  # mm of width per mm along the part: where a ray reads more than a vertex near
+# the ridge allows at this rate, the ray ran along the part (the end of a bar) or grazed it
+OFF_RAY = 0.5  # a boundary crossing counts where it lies within this x its distance of the
+# ray's line, along the normal (a layer curving by up to 27 deg between the two sides)
+RAY_SAMPLES = 12  # points of each ray where the boundary distance is read
 CHUNK = 2_000_000  # ray-segment pairs tested at once (memory)
 
 
@@ -49,9 +53,9 @@ def band_across(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     That is the band a line through the vertex belongs to (the two-sided fit's
     d_outer + d_inner, here for any number of boundary loops): across a bar or a neck its
     width, on a disc its diameter, in a convex corner the width of the bar the corner
-    turns (the ray runs along the other side, not into it). Where the reading grows faster
-    than FLARE per mm along the part (the end of a bar, whose ray runs along it) the width
-    beside it holds. Euclidean, in the plane of
+    turns (the ray runs along the other side, not into it). On a curved layer, where the
+    chord is shorter than the way over the surface, at least twice the largest boundary
+    distance along the ray (a cap's diameter over its dome). Euclidean, in the plane of
     the ray and the vertex normal (a layer is nearly flat across one band). A boundary
     vertex takes the mean of its interior neighbours'.
     distance: (n,) float64 mm boundary distance (``geodesic.boundary_distance``).
@@ -71,6 +75,7 @@ def band_across(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     on_boundary[bnd.ravel()] = True
     ids = used[~on_boundary[used]]
     normal = vertex_normals(v, f)
+    ahead = np.zeros(len(ids))
     if len(ids):
         dist, foot, _ = nearest_feet(v[ids], pa, pb, 16)
         nearest = foot[np.arange(len(ids)), np.argmin(dist, axis=1)]
@@ -88,12 +93,33 @@ def band_across(vertices: NDArray[np.float64], faces: NDArray[np.integer],
             t = np.where(cross, sa / np.where(sa != sb, sa - sb, 1.0), 0.0)
             hit = a[None] + t[..., None] * (b - a)[None]
             along = np.einsum("psk,pk->ps", hit - p0[:, None, :], u[sl])
-            along = np.where(cross & (along > tol.zero), along, np.inf)
+            # a crossing far off the ray along the normal is another part of a curved
+            # layer's boundary, not the one the ray runs into
+            off = np.abs(np.einsum("psk,pk->ps", hit - p0[:, None, :], normal[ids[sl]]))
+            along = np.where(cross & (along > tol.zero) & (off <= OFF_RAY * along), along,
+                             np.inf)
             ahead[sl] = along.min(axis=1)
-        out[ids] = np.where(np.isfinite(ahead), d[ids] + ahead, 2.0 * d[ids])
+        ahead = np.where(np.isfinite(ahead), ahead, 0.0)
+        # on a curved layer the chord is shorter than the way across over the surface: at
+        # least twice the largest boundary distance on the way (the mesh vertex nearest
+        # each of RAY_SAMPLES points of the ray)
+        frac = (np.arange(RAY_SAMPLES) + 0.5) / RAY_SAMPLES
+        x = v[ids][:, None, :] + (ahead[:, None] * frac)[..., None] * u[:, None, :]
+        _, near = cKDTree(v[used]).query(x.reshape(-1, 3))
+        deepest = d[used][near].reshape(len(ids), RAY_SAMPLES).max(axis=1)
+        out[ids] = np.maximum(d[ids] + ahead, 2.0 * np.maximum(deepest, d[ids]))
     e = edge_topology(f).edges
-    if len(ids):
-        out = _flare_limited(v, e, out, ids)
+    # near the ridge (at least 0.4 of its band from the boundary, its ray ran on past the
+    # ridge) a reading holds; elsewhere it is at most FLARE x the way from such a vertex
+    # more: at the end of a bar the ray runs along the bar and reads its length. A ray
+    # that met the boundary before it had come as far as it started from it (the far side
+    # of a band is at least as far as the near one) grazed it: the limit alone there
+    edge = float(np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1).mean()) if len(e) else 0.0
+    deep = ids[(d[ids] >= 0.4 * out[ids]) & (d[ids] >= edge) & (ahead >= 0.5 * d[ids])]
+    if len(deep):
+        limit = _flare_limit(v, e, out, deep)[ids]
+        grazed = ((ahead < d[ids]) | (d[ids] < edge)) & np.isfinite(limit)
+        out[ids] = np.where(grazed, limit, np.minimum(out[ids], limit))
     # boundary vertices: the mean of their interior neighbours (a corner vertex with none:
     # of its neighbours along the boundary)
     src = np.concatenate([e[:, 0], e[:, 1]])
@@ -111,20 +137,18 @@ def band_across(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     return out
 
 
-def _flare_limited(v: NDArray[np.float64], e: NDArray[np.int64], width: NDArray[np.float64],
-                   used: NDArray[np.int64]) -> NDArray[np.float64]:
-    """(n,) ``width`` lowered to min over w of width(w) + FLARE x |v - w| (along the mesh):
-    at the end of a bar the ray runs along the bar and reads its length; the width of the
-    bar beside it is what holds there."""
+def _flare_limit(v: NDArray[np.float64], e: NDArray[np.int64], width: NDArray[np.float64],
+                 sources: NDArray[np.int64]) -> NDArray[np.float64]:
+    """(n,) float64 mm, min over the ``sources`` w of width(w) + FLARE x the way from w
+    along the mesh edges (inf where none is reached)."""
     n = len(v)
     length = np.maximum(np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1), tol.zero)
-    src = np.concatenate([e[:, 0], e[:, 1], np.full(len(used), n)])
-    dst = np.concatenate([e[:, 1], e[:, 0], used])
-    # a virtual source joined to every vertex by its own width (over FLARE)
-    weight = np.concatenate([length, length, np.maximum(width[used], tol.zero) / FLARE])
+    src = np.concatenate([e[:, 0], e[:, 1], np.full(len(sources), n)])
+    dst = np.concatenate([e[:, 1], e[:, 0], sources])
+    # a virtual source joined to every source vertex by its width (over FLARE)
+    weight = np.concatenate([length, length, np.maximum(width[sources], tol.zero) / FLARE])
     graph = sp.csr_matrix((weight, (src, dst)), shape=(n + 1, n + 1))
-    reach = dijkstra(graph, indices=n)[:n]
-    return np.where(np.isfinite(reach), np.minimum(width, FLARE * reach), width)
+    return np.asarray(FLARE * dijkstra(graph, indices=n)[:n], dtype=np.float64)
 
 
 def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer],
@@ -151,7 +175,7 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
     phi = d / pitch
     parts: list[SurfaceLines] = []
     maps: list[NDArray[np.int64]] = []
-    for k in range(int(n_face.max()) // 2):
+    for k in range(min(int(n_face.max()) // 2, int(np.ceil(phi.max())))):
         sel = np.flatnonzero(n_face // 2 > k)
         part = iso_lines(vertices, f[sel], phi, np.array([k + 0.5]))
         if part.n_lines:
