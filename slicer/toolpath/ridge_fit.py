@@ -118,7 +118,7 @@ def band_across(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     deep = ids[(d[ids] >= 0.4 * out[ids]) & (d[ids] >= edge) & (ahead >= 0.5 * d[ids])]
     if len(deep):
         limit = _flare_limit(v, e, out, deep)[ids]
-        grazed = ((ahead < d[ids]) | (d[ids] < edge)) & np.isfinite(limit)
+        grazed = (ahead < d[ids]) & np.isfinite(limit)
         out[ids] = np.where(grazed, limit, np.minimum(out[ids], limit))
     # boundary vertices: the mean of their interior neighbours (a corner vertex with none:
     # of its neighbours along the boundary)
