@@ -222,9 +222,10 @@ def _component_toolpath_unsafe(
         if no_band:
             fallback = fallback or ComponentFallback.HOLES_FILLED
         match = run_joined(surf, used)
-        if used == Pattern.CONTOUR and surf.fit_ridge and surf.band_sides() is None:
+        if (used == Pattern.CONTOUR and surf.fit_ridge
+                and (surf.band_sides() is None or surf.fill_holes)):
             # no band: the lines fitted to the local width (``ridge_fit.py``) or eq. 9's
-            # rings, whichever keeps its spacing better (p90 of the width error)
+            # rings (in the band fit's holes), whichever keeps its spacing better (p90)
             rings = replace(surf, fit_ridge=False)
             alt = run_joined(rings, used)
             if (abs(alt.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
