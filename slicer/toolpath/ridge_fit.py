@@ -7,14 +7,14 @@ a hole and the rim) the last lines stand at an arbitrary distance from the ridge
 2.8 W wide holds lines at 0.5 and 1.5 W from each side, 0.2 W apart, and a bar 2.5 W wide
 gets a ring collapsed onto itself.
 
-Here every point takes the height R of the ridge it climbs to (``ridge_height``: the
-boundary distance where its steepest ascent meets the front from the other side), so the
-local width across it is b = 2 R. The band fit of ``contours.two_sided_contour_lines``
-then applies to every component, one boundary loop or many: n = round(b / spacing) lines
-at the even pitch b / n, floor(n / 2) of them at d = (k + 1/2) pitch from the boundary
-and, for odd n, one on the ridge itself (the medial line, ``medial.medial_lines``). On a
-band between two loops this is the two-sided fit; on a disc the rings spaced to fill its
-radius exactly.
+Here every vertex reads the width b of the part across it (``band_across``: along the ray
+straight away from its nearest boundary point, to where the boundary is met again), and
+the band fit of ``contours.two_sided_contour_lines`` applies to every component, one
+boundary loop or many: n = round(b / spacing) lines at the even pitch b / n, floor(n / 2)
+of them at d = (k + 1/2) pitch from the boundary and, for odd n, one on the ridge itself
+(the medial line, ``medial.medial_lines``). On a band between two loops this is the
+two-sided fit; on a disc the rings spaced to fill its radius exactly. The strategy keeps
+these lines where they keep their spacing better than eq. 9's (``strategy.py``).
 """
 
 from __future__ import annotations
