@@ -50,13 +50,15 @@ def test_a_bar_holds_a_whole_number_of_lines_at_an_even_pitch() -> None:
 
 def _contour_layer(v: np.ndarray, f: np.ndarray, fit: bool) -> tuple[float, float, float, float]:
     """Gap, overlap, contour width error p90 and volume error of one flat contour layer
-    (H 0.6 mm, W 2.3 mm) with ``toolpath.fit_ridge`` = ``fit``."""
+    (H 0.6 mm, W 2.3 mm) with ``toolpath.fit_ridge`` = ``fit``; printed in one path (the
+    ring blends into the middle line's spiral end, ``spiral.spiral_runs``)."""
     layers = Layers(v, f, np.zeros(len(f), np.int32), np.full(len(v), 0.6),
                     np.tile([0.0, 0.0, 1.0], (len(v), 1)))
     job = JobConfig().with_overrides(toolpath={"fit_ridge": fit})
     res = compute_toolpath(layers, job, PROFILE, measure_baselines=False, workers=1)
     assert np.all(res.toolpath.pattern[res.toolpath.extrude] == Pattern.CONTOUR)
     cov = layer_coverage(layers, res.toolpath, max_samples=20_000)
+    assert res.report["extrusion_starts"]["total"] == 1
     p90 = float(res.report["width_error"]["contour"]["p90"])
     return float(cov.gap[0]), float(cov.overlap[0]), p90, float(res.report["layer_volume_error"])
 
