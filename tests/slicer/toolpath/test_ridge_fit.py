@@ -51,7 +51,7 @@ def test_a_bar_holds_a_whole_number_of_lines_at_an_even_pitch() -> None:
 def _contour_layer(v: np.ndarray, f: np.ndarray, fit: bool) -> tuple[float, float, float, float]:
     """Gap, overlap, contour width error p90 and volume error of one flat contour layer
     (H 0.6 mm, W 2.3 mm) with ``toolpath.fit_ridge`` = ``fit``; printed in one path (the
-    ring blends into the middle line's spiral end, ``spiral.spiral_runs``)."""
+    ring joined to the middle line that follows it)."""
     layers = Layers(v, f, np.zeros(len(f), np.int32), np.full(len(v), 0.6),
                     np.tile([0.0, 0.0, 1.0], (len(v), 1)))
     job = JobConfig().with_overrides(toolpath={"fit_ridge": fit})
