@@ -1,7 +1,7 @@
-"""Coverage of contour layers with the rings joined by connectors (before) and as a spiral.
+"""Coverage of contour layers with eq. 9's lines (before) and fitted to the local width.
 
 Every STEP-th contour layer of each sliced job (``mesp slice MODEL --until layers`` is
-enough) is printed twice on the same layers, ``toolpath.spiral_rings`` false and true, and
+enough) is printed twice on the same layers, ``toolpath.fit_ridge`` false and true, and
 measured as ``mesp slice`` measures it: area-weighted gap and overlap (``toolpath.coverage``,
 connectors and blends included), the contour width error p50/p90 and the chosen layers'
 volume error (deposited / integral of H - 1). Usage:
@@ -40,7 +40,7 @@ from slicer.toolpath.coverage import (
 )
 from slicer.toolpath.layer_build import layer_pattern, layer_toolpath, split_layers
 
-MODES = (("connectors", False), ("spiral", True))
+MODES = (("eq9", False), ("ridge-fit", True))  # toolpath.fit_ridge
 
 
 def contour_layers(layers: Layers, first: str, step: int) -> Layers:
@@ -52,10 +52,10 @@ def contour_layers(layers: Layers, first: str, step: int) -> Layers:
                   layers.vertex_height, layers.vertex_direction)
 
 
-def measure(job_dir: Path, step: int, spiral: bool) -> dict[str, Any]:
+def measure(job_dir: Path, step: int, fit: bool) -> dict[str, Any]:
     """Contour coverage, width error and volume error of the chosen layers."""
     job = load_job(job_dir / "job.toml")
-    cfg = job.with_overrides(toolpath={"spiral_rings": spiral}).toolpath
+    cfg = job.with_overrides(toolpath={"fit_ridge": fit}).toolpath
     profile = load_profile(job.extrusion.profile)
     sub = contour_layers(Layers.load(job_dir), cfg.first_pattern, step)
     start = time.perf_counter()
@@ -82,7 +82,7 @@ def measure(job_dir: Path, step: int, spiral: bool) -> dict[str, Any]:
 
 
 def figure(job_dir: Path, layer: int, png: Path) -> None:
-    """One layer's coverage with connectors and as a spiral, side by side."""
+    """One layer's coverage with eq. 9's lines and fitted to the local width, side by side."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -99,8 +99,8 @@ def figure(job_dir: Path, layer: int, png: Path) -> None:
     centre = mesh.vertices.mean(axis=0)
     axes = np.linalg.svd(mesh.vertices - centre, full_matrices=False)[2][:2]
     fig, panels = plt.subplots(1, 2, figsize=(12, 6))
-    for ax, (name, spiral) in zip(panels, MODES, strict=True):
-        cfg = job.with_overrides(toolpath={"spiral_rings": spiral}).toolpath
+    for ax, (name, fit) in zip(panels, MODES, strict=True):
+        cfg = job.with_overrides(toolpath={"fit_ridge": fit}).toolpath
         res = layer_toolpath(mesh, layer_pattern(mesh.index, cfg.first_pattern), cfg, profile,
                              False)
         tp, _ = assemble([res])
@@ -143,8 +143,8 @@ def main() -> None:
         return
     out: dict[str, Any] = {}
     for job_dir in args.jobs:
-        for name, spiral in MODES:
-            row = measure(job_dir, args.step, spiral)
+        for name, fit in MODES:
+            row = measure(job_dir, args.step, fit)
             out[f"{job_dir.name}:{name}"] = row
             print(f"{job_dir.name}:{name:10s} layers {row['layers']:3d}  gap/overlap "
                   f"{_pct(row['gap'])}/{_pct(row['overlap'])}  width p50/p90 "

@@ -179,6 +179,7 @@ class ToolpathConfig:
     join_factor: float = _JOB["toolpath"]["join_factor"]
     spiral_rings: bool = _JOB["toolpath"]["spiral_rings"]
     fit_bands: bool = _JOB["toolpath"]["fit_bands"]
+    fit_ridge: bool = _JOB["toolpath"]["fit_ridge"]
     pitch_width: bool = _JOB["toolpath"]["pitch_width"]
     flush: bool = _JOB["toolpath"]["flush"]
     stripe_perimeter: bool = _JOB["toolpath"]["stripe_perimeter"]

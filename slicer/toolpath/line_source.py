@@ -49,6 +49,8 @@ class LineSource:
             fill them.
         wall_half_width: stripes only where the component is wider than 2 x this, its
             narrow walls get their centre line (``narrow_walls``); 0: stripes everywhere.
+        fit_ridge: contours that are not fitted to a band get a whole number of lines
+            across the component's local width (``ridge_fit.py``) instead of eq. 9's.
     """
 
     geometry: SurfaceGeometry
@@ -56,14 +58,15 @@ class LineSource:
     perimeter: bool = False
     fill_holes: bool = False
     wall_half_width: float = 0.0
+    fit_ridge: bool = False
 
     @staticmethod
     def of(vertices: NDArray[np.float64], faces: NDArray[np.int32], fit_bands: bool = True,
            perimeter: bool = False, distance: Backend = "eikonal",
-           stripe_field: StripeField = "across") -> LineSource:
+           stripe_field: StripeField = "across", fit_ridge: bool = False) -> LineSource:
         """The line source of a new surface."""
         return LineSource(SurfaceGeometry(vertices, faces, distance, stripe_field), fit_bands,
-                          perimeter)
+                          perimeter, fit_ridge=fit_ridge)
 
     @property
     def vertices(self) -> NDArray[np.float64]:
@@ -117,7 +120,7 @@ class LineSource:
         if self.fill_holes or self.band_fit_covers(spacing):
             return self
         return LineSource(self.geometry, self.fit_bands, self.perimeter, True,
-                          self.wall_half_width)
+                          self.wall_half_width, self.fit_ridge)
 
     def width_scale(self, pattern: int, spacing: float) -> NDArray[np.float64] | None:
         """(n,) float64, the band's local pitch over ``spacing`` (within
@@ -145,11 +148,20 @@ class LineSource:
                 return None
             wall = self.geometry.reach(self.wall_half_width) > self.wall_half_width
             return np.where(wall, centre, 1.0)
+        if self._ridge_fitted(pattern):
+            pitch = self.geometry.ridge_fit(spacing)[1]
+            return np.asarray(np.clip(pitch / spacing, *CENTRE_WIDTH_SCALE), dtype=np.float64)
         sides = self.band_sides() if pattern == Pattern.CONTOUR else None
         if sides is None or self.fill_holes:
             return None
         pitch, _ = self.geometry.band_pitch(spacing)
         return np.asarray(np.clip(pitch / spacing, *CENTRE_WIDTH_SCALE), dtype=np.float64)
+
+    def _ridge_fitted(self, pattern: int) -> bool:
+        """Contours fitted to the local width (``fit_ridge``): where they are not fitted
+        to a band between two sides, or that fit leaves holes."""
+        return (pattern == Pattern.CONTOUR and self.fit_ridge
+                and (self.band_sides() is None or self.fill_holes))
 
     def centre_lines(self) -> SurfaceLines:
         """One line along the middle of a component about one width wide: between its two
@@ -192,6 +204,8 @@ class LineSource:
         gets a loop along its middle).
         """
         geo = self.geometry
+        if self._ridge_fitted(pattern):
+            return geo.ridge_fit(spacing)[0]
         if pattern == Pattern.CONTOUR:
             if self.band_sides() is not None:
                 fitted = geo.fitted_contours(spacing)

@@ -200,12 +200,15 @@ class SpiralPlanner:
         w = float(np.mean(self.width[ring.points]))
         return float(np.linalg.norm(pts - pts.mean(axis=0), axis=1).min()) < 0.5 * w
 
-    def shortened(self, a: Piece, footprint: float | None, force: bool = False) -> Run:
+    def shortened(self, a: Piece, footprint: float | None, force: bool = False,
+                  ridge: bool = True) -> Run:
         """The last ring of a spiral (a blend arrived at it, ``footprint`` mm): stopped half
         its footprint before its end, then the line along its ridge where it leaves a bare
         spot. A lone ring (no footprint, not ``force``) is printed whole, as it was: on the
         tips of a part (a ring or two across) the line's ink spread the ring outwards and
-        doubled the width error where the flow fit had kept it."""
+        doubled the width error where the flow fit had kept it. Without ``ridge`` (a line
+        of its own runs along the ridge: contours fitted to an odd count) no line is added.
+        """
         idx = np.asarray(a.points, dtype=np.int64)
         if footprint is None and not force:
             return Run(idx, a.line, None, False)
@@ -213,7 +216,7 @@ class SpiralPlanner:
             pa = _unroll(self.lines.points, idx)
             idx = idx[pa.s[: len(idx)] < pa.length - 0.5 * footprint]
         ring = np.asarray(a.points, dtype=np.int64)
-        return Run(idx, a.line, self.centre(ring, int(idx[-1]), force), False)
+        return Run(idx, a.line, self.centre(ring, int(idx[-1]), force) if ridge else None, False)
 
 
 def spiral_runs(planner: SpiralPlanner, pieces: list[Piece],
@@ -223,16 +226,29 @@ def spiral_runs(planner: SpiralPlanner, pieces: list[Piece],
     ``can_join(point_a, point_b) -> bool``: whether the linking would join two line points by
     an extruding connector (the rings are neighbours). The first ring of a spiral starts its
     blend half a blend before its start, the last stops half a footprint early when it ends
-    the component.
+    the component. Open lines after the rings (the middle line of contours fitted to an odd
+    count, ``ridge_fit.py``) follow the spiral as they are, and take the place of its
+    ridge line.
     """
+    n_rings = next((k for k, p in enumerate(pieces) if not _is_ring(p)), len(pieces))
+    tail = [Run(np.asarray(p.points, dtype=np.int64), p.line, None, False)
+            for p in pieces[n_rings:]]
+    if tail and n_rings >= 1 and not any(_is_ring(p) for p in pieces[n_rings:]):
+        return _spiral(planner, list(pieces[:n_rings]), can_join, ridge=False) + tail
+    return _spiral(planner, list(pieces), can_join)
+
+
+def _spiral(planner: SpiralPlanner, pieces: list[Piece], can_join: Callable[[int, int], bool],
+            ridge: bool = True) -> list[Run]:
+    """``spiral_runs`` of pieces that are all rings (else each as it is); ``ridge``: the
+    last ring may add its ridge line."""
     if len(boundary_loops(planner.faces)) != 1 or not all(_is_ring(p) for p in pieces):
         # a band between two boundaries (fitted contours: where its line count changes the
         # rings' ink falls short and the connectors made it up, so blending pulled tau down
         # and the width error up, docs/benchmarks.md session 17), or an open line
         return [Run(np.asarray(p.points, dtype=np.int64), p.line, None, False) for p in pieces]
     runs: list[Run] = []
-    pieces = list(pieces)
-    force = (len(pieces) >= 2 and planner.thin(pieces[-1])
+    force = (ridge and len(pieces) >= 2 and planner.thin(pieces[-1])
              and planner.centre(np.asarray(pieces[-2].points, dtype=np.int64),
                                 int(pieces[-2].points[-1]), True) is not None)
     if force:
@@ -253,7 +269,7 @@ def spiral_runs(planner: SpiralPlanner, pieces: list[Piece],
             runs.append(run)
             continue
         if nxt is None and _is_ring(piece):
-            runs.append(planner.shortened(piece, footprint, force))
+            runs.append(planner.shortened(piece, footprint, force, ridge))
         else:
             runs.append(Run(np.asarray(piece.points, dtype=np.int64), piece.line, None, False))
         footprint = None

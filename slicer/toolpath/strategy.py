@@ -8,7 +8,7 @@ is mostly narrower than NARROW_STRIPES * W is printed with contours; a band at m
 one width wide holds one centre line whose width follows the band (between its two sides,
 or its medial line where it has one boundary loop or many: ``medial.py``); a contour
 component that is no band gets eq. 9's lines in the fitted lines' holes or eq. 9's alone,
-and a stripe
+lines fitted to its local width or eq. 9's rings (``ridge_fit.py``), and a stripe
 component partly narrow walls gets the walls' centre lines, whichever keeps its spacing
 better (p90 of the width error); a volume still off by THIN_SHORTFALL tries the other
 pattern and the centre line; one off by FLOW_FIT_ABOVE gets its nozzle speed scaled. A
@@ -99,7 +99,7 @@ def _component_toolpath_unsafe(
     t0 = time.perf_counter()
     perimeter = cfg.stripe_perimeter and pattern == Pattern.STRIPE
     surf = LineSource.of(deformed, comp.faces, cfg.fit_bands, perimeter, cfg.boundary_distance,
-                         cfg.stripe_field)
+                         cfg.stripe_field, cfg.fit_ridge)
     surf.geometry.distance  # noqa: B018 (timed here: every line generator needs it)
     timings["distance"] = time.perf_counter() - t0
 
@@ -223,6 +223,15 @@ def _component_toolpath_unsafe(
         if no_band:
             fallback = fallback or ComponentFallback.HOLES_FILLED
         match = run_joined(surf, used)
+        if (used == Pattern.CONTOUR and surf.fit_ridge
+                and (surf.band_sides() is None or surf.fill_holes)):
+            # no band: the lines fitted to the local width (``ridge_fit.py``) or eq. 9's
+            # rings (in the band fit's holes), whichever keeps its spacing better (p90)
+            rings = replace(surf, fit_ridge=False)
+            alt = run_joined(rings, used)
+            if (abs(alt.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
+                    and p90(alt) < p90(match)):
+                surf, match = rings, alt
         if no_band and abs(match.rel_error) <= FLOW_FIT_ABOVE:
             # No band: the fitted lines with eq. 9's in their holes, or eq. 9 alone (a
             # disc with slits at its rim, the membrane's dome top: p90 13 -> 12 %, p95

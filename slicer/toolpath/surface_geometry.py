@@ -22,6 +22,8 @@ from slicer.toolpath.eikonal import points_to_segments
 from slicer.toolpath.geodesic import boundary_distance, distance_from
 from slicer.toolpath.isolines import iso_lines
 from slicer.toolpath.lines import SurfaceLines, empty_lines
+from slicer.toolpath.medial import medial_lines
+from slicer.toolpath.ridge_fit import band_across, ridge_fitted_lines
 from slicer.toolpath.stripes import stripe_lines
 from slicer.toolpath.surface import (
     boundary_loops,
@@ -66,6 +68,8 @@ class SurfaceGeometry:
     _stripes: dict[float, SurfaceLines] = field(default_factory=dict, repr=False)
     _smoother: list[Callable[[NDArray[np.float64]], NDArray[np.float64]]] = field(
         default_factory=list, repr=False)
+    _ridge_fit: dict[float, tuple[SurfaceLines, NDArray[np.float64]]] = field(
+        default_factory=dict, repr=False)
 
     @cached_property
     def distance(self) -> NDArray[np.float64]:
@@ -169,6 +173,28 @@ class SurfaceGeometry:
             self._stripes.clear()
             self._stripes[spacing] = lines
         return self._stripes[spacing]
+
+    @cached_property
+    def band_across(self) -> NDArray[np.float64]:
+        """(n,) float64, the component's width across each vertex (``ridge_fit.band_across``)."""
+        return band_across(self.vertices, self.faces, self.distance)
+
+    @cached_property
+    def ridge(self) -> SurfaceLines:
+        """Where fronts from different stretches of the boundary meet (the medial line,
+        ``medial.medial_lines``)."""
+        return medial_lines(self.vertices, self.faces)
+
+    def ridge_fit(self, spacing: float) -> tuple[SurfaceLines, NDArray[np.float64]]:
+        """``ridge_fit.ridge_fitted_lines`` at ``spacing``, the pitch blended over
+        PITCH_SMOOTHING spacings: the lines and (n,) their local pitch."""
+        if spacing not in self._ridge_fit:
+            smooth = self.smoother(PITCH_SMOOTHING * spacing) if PITCH_SMOOTHING > 0 else None
+            fit = ridge_fitted_lines(self.vertices, self.faces, self.distance,
+                                     self.band_across, spacing, smooth, ridge=self.ridge)
+            self._ridge_fit.clear()
+            self._ridge_fit[spacing] = fit
+        return self._ridge_fit[spacing]
 
     def centre_lines(self) -> SurfaceLines:
         """One line along the middle of a band with holes, where the distances from the

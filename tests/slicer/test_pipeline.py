@@ -13,6 +13,7 @@ from core.stages import Toolpath
 from slicer.config import load_job
 from slicer.extrusion import load_profile
 from slicer.pipeline import slice_model
+from slicer.toolpath.flush import filament_height
 from tests.slicer.conftest import box_mesh
 
 
@@ -46,7 +47,8 @@ def test_flush_moves_exposed_waypoints_along_their_normal_within_the_bulge(
     # along the printing direction only, by at most (h_f - H) / 2
     along = np.einsum("ij,ij->i", move, plain.normal)
     np.testing.assert_allclose(np.abs(along[moved]), dist[moved], rtol=1e-6, atol=1e-9)
-    _, h_f = load_profile("ecoflex-0030").filament_size(plain.speed[moved])
+    # h_f at each waypoint's speed, area-consistent (stripes print at varying speeds)
+    h_f = filament_height(plain, load_profile("ecoflex-0030"))[moved]
     assert np.all(dist[moved] <= 0.5 * (h_f - plain.height[moved]) + 1e-6)
     # a planar box: only the first layer (moved up) and the last (moved down) are exposed
     layers = np.unique(plain.layer[moved])

@@ -560,7 +560,9 @@ def test_band_fitting_on_an_annulus_layer() -> None:
     reports = []
     for fit in (True, False):
         job = JobConfig()
-        job = dataclasses.replace(job, toolpath=dataclasses.replace(job.toolpath, fit_bands=fit))
+        # (the eq. 9 baseline without the fit to the local width either, ``ridge_fit.py``)
+        job = dataclasses.replace(job, toolpath=dataclasses.replace(
+            job.toolpath, fit_bands=fit, fit_ridge=fit))
         res = compute_toolpath(layers, job, PROFILE, measure_baselines=False, workers=1)
         reports.append(res.report)
         assert abs(res.report["layer_volume_error"]) < 0.02

@@ -1,0 +1,196 @@
+"""Contours fitted to the local width of any component: a whole number of lines across it.
+
+Eq. 9's iso-lines of the boundary distance d at (k + 1/2) tau W fit a region only where its
+width is a whole number of spacings. Where fronts grown from different stretches of the
+boundary meet (the ridge of d: a neck, a bar, the wall between two holes, the strip between
+a hole and the rim) the last lines stand at an arbitrary distance from the ridge: a neck
+2.8 W wide holds lines at 0.5 and 1.5 W from each side, 0.2 W apart, and a bar 2.5 W wide
+gets a ring collapsed onto itself.
+
+Here every vertex reads the width b of the part across it (``band_across``: along the ray
+straight away from its nearest boundary point, to where the boundary is met again), and
+the band fit of ``contours.two_sided_contour_lines`` applies to every component, one
+boundary loop or many: n = round(b / spacing) lines at the even pitch b / n, floor(n / 2)
+of them at d = (k + 1/2) pitch from the boundary and, for odd n, one on the ridge itself
+(the medial line, ``medial.medial_lines``). On a band between two loops this is the
+two-sided fit; on a disc the rings spaced to fill its radius exactly. The strategy keeps
+these lines where they keep their spacing better than eq. 9's (``strategy.py``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import NDArray
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from core.tolerance import tol
+from slicer.toolpath.contours import BRANCH_ROOM, band_pitch
+from slicer.toolpath.eikonal import nearest_feet, split_segments
+from slicer.toolpath.isolines import iso_lines
+from slicer.toolpath.lines import SurfaceLines, empty_lines, merge_lines
+from slicer.toolpath.medial import medial_lines
+from slicer.toolpath.perimeter import clip_lines
+from slicer.toolpath.surface import boundary_edges, check_mesh, edge_topology, vertex_normals
+
+FLARE = 1.0  # mm of width per mm along the part: where a ray reads more than a vertex near
+# the ridge allows at this rate, the ray ran along the part (the end of a bar) or grazed it
+OFF_RAY = 0.5  # a boundary crossing counts where it lies within this x its distance of the
+# ray's line, along the normal (a layer curving by up to 27 deg between the two sides)
+RAY_SAMPLES = 12  # points of each ray where the boundary distance is read
+CHUNK = 2_000_000  # ray-segment pairs tested at once (memory)
+
+
+def band_across(vertices: NDArray[np.float64], faces: NDArray[np.integer],
+                distance: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(n,) float64 mm, the width of the component across each vertex: its boundary
+    distance plus how far on, straight away from its nearest boundary point, the boundary
+    is met again.
+
+    That is the band a line through the vertex belongs to (the two-sided fit's
+    d_outer + d_inner, here for any number of boundary loops): across a bar or a neck its
+    width, on a disc its diameter, in a convex corner the width of the bar the corner
+    turns (the ray runs along the other side, not into it). On a curved layer, where the
+    chord is shorter than the way over the surface, at least twice the largest boundary
+    distance along the ray (a cap's diameter over its dome). Euclidean, in the plane of
+    the ray and the vertex normal (a layer is nearly flat across one band). A boundary
+    vertex takes the mean of its interior neighbours'.
+    distance: (n,) float64 mm boundary distance (``geodesic.boundary_distance``).
+    """
+    check_mesh(vertices, faces)
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    d = np.asarray(distance, dtype=np.float64)
+    bnd = boundary_edges(f)
+    out = 2.0 * d
+    if len(bnd) == 0 or len(f) == 0:
+        return out
+    a, b = v[bnd[:, 0]], v[bnd[:, 1]]
+    pa, pb = split_segments(a, b)
+    used = np.unique(f)
+    on_boundary = np.zeros(len(v), dtype=bool)
+    on_boundary[bnd.ravel()] = True
+    ids = used[~on_boundary[used]]
+    normal = vertex_normals(v, f)
+    ahead = np.zeros(len(ids))
+    if len(ids):
+        dist, foot, _ = nearest_feet(v[ids], pa, pb, 16)
+        nearest = foot[np.arange(len(ids)), np.argmin(dist, axis=1)]
+        u = v[ids] - nearest
+        u /= np.maximum(np.linalg.norm(u, axis=1), tol.zero)[:, None]
+        cut = np.cross(u, normal[ids])  # normal of the plane holding the ray
+        ahead = np.full(len(ids), np.inf)
+        step = max(1, CHUNK // max(len(a), 1))
+        for lo in range(0, len(ids), step):
+            sl = slice(lo, lo + step)
+            p0 = v[ids[sl]]
+            sa = np.einsum("pk,sk->ps", cut[sl], a) - np.einsum("pk,pk->p", cut[sl], p0)[:, None]
+            sb = np.einsum("pk,sk->ps", cut[sl], b) - np.einsum("pk,pk->p", cut[sl], p0)[:, None]
+            cross = (sa * sb <= 0.0) & (sa != sb)
+            t = np.where(cross, sa / np.where(sa != sb, sa - sb, 1.0), 0.0)
+            hit = a[None] + t[..., None] * (b - a)[None]
+            along = np.einsum("psk,pk->ps", hit - p0[:, None, :], u[sl])
+            # a crossing far off the ray along the normal is another part of a curved
+            # layer's boundary, not the one the ray runs into
+            off = np.abs(np.einsum("psk,pk->ps", hit - p0[:, None, :], normal[ids[sl]]))
+            along = np.where(cross & (along > tol.zero) & (off <= OFF_RAY * along), along,
+                             np.inf)
+            ahead[sl] = along.min(axis=1)
+        ahead = np.where(np.isfinite(ahead), ahead, 0.0)
+        # on a curved layer the chord is shorter than the way across over the surface: at
+        # least twice the largest boundary distance on the way (the mesh vertex nearest
+        # each of RAY_SAMPLES points of the ray)
+        frac = (np.arange(RAY_SAMPLES) + 0.5) / RAY_SAMPLES
+        x = v[ids][:, None, :] + (ahead[:, None] * frac)[..., None] * u[:, None, :]
+        _, near = cKDTree(v[used]).query(x.reshape(-1, 3))
+        deepest = d[used][near].reshape(len(ids), RAY_SAMPLES).max(axis=1)
+        out[ids] = np.maximum(d[ids] + ahead, 2.0 * np.maximum(deepest, d[ids]))
+    e = edge_topology(f).edges
+    # near the ridge (at least 0.4 of its band from the boundary, its ray ran on past the
+    # ridge) a reading holds; elsewhere it is at most FLARE x the way from such a vertex
+    # more: at the end of a bar the ray runs along the bar and reads its length. A ray
+    # that met the boundary before it had come as far as it started from it (the far side
+    # of a band is at least as far as the near one) grazed it: the limit alone there
+    edge = float(np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1).mean()) if len(e) else 0.0
+    deep = ids[(d[ids] >= 0.4 * out[ids]) & (d[ids] >= edge) & (ahead >= 0.5 * d[ids])]
+    if len(deep):
+        limit = _flare_limit(v, e, out, deep)[ids]
+        grazed = (ahead < d[ids]) & np.isfinite(limit)
+        out[ids] = np.where(grazed, limit, np.minimum(out[ids], limit))
+    # boundary vertices: the mean of their interior neighbours (a corner vertex with none:
+    # of its neighbours along the boundary)
+    src = np.concatenate([e[:, 0], e[:, 1]])
+    dst = np.concatenate([e[:, 1], e[:, 0]])
+    known = ~on_boundary
+    for _ in range(2):
+        take = on_boundary[src] & known[dst]
+        total = np.zeros(len(v))
+        count = np.zeros(len(v))
+        np.add.at(total, src[take], out[dst[take]])
+        np.add.at(count, src[take], 1.0)
+        has = on_boundary & ~known & (count > 0)
+        out[has] = total[has] / count[has]
+        known = known | has
+    return out
+
+
+def _flare_limit(v: NDArray[np.float64], e: NDArray[np.int64], width: NDArray[np.float64],
+                 sources: NDArray[np.int64]) -> NDArray[np.float64]:
+    """(n,) float64 mm, min over the ``sources`` w of width(w) + FLARE x the way from w
+    along the mesh edges (inf where none is reached)."""
+    n = len(v)
+    length = np.maximum(np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1), tol.zero)
+    src = np.concatenate([e[:, 0], e[:, 1], np.full(len(sources), n)])
+    dst = np.concatenate([e[:, 1], e[:, 0], sources])
+    # a virtual source joined to every source vertex by its width (over FLARE)
+    weight = np.concatenate([length, length, np.maximum(width[sources], tol.zero) / FLARE])
+    graph = sp.csr_matrix((weight, (src, dst)), shape=(n + 1, n + 1))
+    return np.asarray(FLARE * dijkstra(graph, indices=n)[:n], dtype=np.float64)
+
+
+def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer],
+                       distance: NDArray[np.float64], band: NDArray[np.float64],
+                       spacing: float,
+                       smooth: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
+                       room: float = BRANCH_ROOM, ridge: SurfaceLines | None = None,
+                       ) -> tuple[SurfaceLines, NDArray[np.float64]]:
+    """Contours with a whole number of lines across the local width ``band``.
+
+    distance: (n,) float64 mm boundary distance; band: (n,) float64 mm, ``band_across``.
+    spacing: mm, target pitch (tau W); smooth, room: as ``contours.two_sided_contour_lines``
+    (the pitch blended where the count changes, a line starts where it has nearly a full
+    pitch of room). ridge: ``medial.medial_lines`` of the surface when the caller has it.
+    Returns the lines and (n,) float64 mm, the local pitch they are laid at.
+    """
+    check_mesh(vertices, faces)
+    f = np.asarray(faces, dtype=np.int64)
+    d = np.asarray(distance, dtype=np.float64)
+    width = np.maximum(np.asarray(band, dtype=np.float64), 2.0 * d)
+    pitch, fit = band_pitch(d, width - d, spacing, smooth)
+    n_face = np.maximum(np.floor((fit / pitch)[f].mean(axis=1) + 0.5 - room), 1
+                        ).astype(np.int64)
+    phi = d / pitch
+    parts: list[SurfaceLines] = []
+    maps: list[NDArray[np.int64]] = []
+    for k in range(min(int(n_face.max()) // 2, int(np.ceil(phi.max())))):
+        sel = np.flatnonzero(n_face // 2 > k)
+        part = iso_lines(vertices, f[sel], phi, np.array([k + 0.5]))
+        if part.n_lines:
+            parts.append(part)
+            maps.append(sel)
+    if ridge is None:
+        ridge = medial_lines(np.asarray(vertices, dtype=np.float64), f.astype(np.int32))
+    if ridge.n_lines and np.any(n_face % 2 == 1):
+        # an odd count's middle line on the ridge: the medial line where the count at its
+        # vertices is odd (phi = n / 2 there: a quarter pitch beyond the last pair's level)
+        n_vertex = np.maximum(np.floor(fit / pitch + 0.5 - room), 1)
+        middle = clip_lines(ridge, vertices, f.astype(np.int32),
+                            phi - np.floor(0.5 * n_vertex) - 0.25, 0.0)
+        if middle.n_lines:
+            parts.append(middle)
+            maps.append(np.arange(len(f)))
+    lines = merge_lines(parts, maps) if parts else empty_lines()
+    return lines, pitch

@@ -1,0 +1,77 @@
+"""Contours fitted to the local width: the width across a bar and a disc, and a bar whose
+width is no whole number of spacings printed without the gap and the doubled ring eq. 9
+leaves where its fronts meet."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from core.stages import Layers, Pattern
+from slicer.config import JobConfig
+from slicer.extrusion import load_profile
+from slicer.toolpath.build import compute_toolpath
+from slicer.toolpath.coverage import layer_coverage
+from slicer.toolpath.geodesic import boundary_distance
+from slicer.toolpath.ridge_fit import band_across, ridge_fitted_lines
+from slicer.toolpath.width_error import line_spacing
+from tests.slicer.toolpath.pattern_meshes import disc
+from tests.slicer.toolpath.test_medial import strip
+
+PROFILE = load_profile("ecoflex-0030")
+
+
+def test_the_width_across_a_bar_and_a_disc() -> None:
+    """Across a bar its width (also in its corners: the ray runs along the other side),
+    on a disc its diameter."""
+    v, f = strip(30.0, 6.2, 0.4)
+    b = band_across(v, f, boundary_distance(v, f, backend="eikonal"))
+    middle = (v[:, 0] > 4.0) & (v[:, 0] < 26.0)
+    assert np.allclose(b[middle], 6.2, rtol=0.03)
+    corner = (v[:, 0] < 1.5) & (v[:, 1] < 0.5 * v[:, 0])
+    assert np.allclose(b[corner], 6.2, rtol=0.05)
+    v, f = disc(10.0, 0.5)
+    b = band_across(v, f, boundary_distance(v, f, backend="eikonal"))
+    assert np.median(b) == pytest.approx(20.0, rel=0.03)
+
+
+def test_a_bar_holds_a_whole_number_of_lines_at_an_even_pitch() -> None:
+    """A bar 3.1 spacings wide: eq. 9 lays lines at 0.5 and 1.5 spacings from each side,
+    0.1 spacing apart in the middle; fitted, three lines (a ring and the middle line) at
+    3.1 / 3 apart."""
+    v, f = strip(30.0, 6.2, 0.4)
+    d = boundary_distance(v, f, backend="eikonal")
+    lines, pitch = ridge_fitted_lines(v, f, d, band_across(v, f, d), 2.0)
+    spacing = line_spacing(lines.points, lines.line)
+    mid = (lines.points[:, 0] > 5.0) & (lines.points[:, 0] < 25.0)
+    assert np.allclose(spacing[mid], 6.2 / 3, rtol=0.04)
+    assert np.median(pitch) == pytest.approx(6.2 / 3, rel=0.02)
+
+
+def _contour_layer(v: np.ndarray, f: np.ndarray, fit: bool) -> tuple[float, float, float, float]:
+    """Gap, overlap, contour width error p90 and volume error of one flat contour layer
+    (H 0.6 mm, W 2.3 mm) with ``toolpath.fit_ridge`` = ``fit``; printed in one path (the
+    ring joined to the middle line that follows it)."""
+    layers = Layers(v, f, np.zeros(len(f), np.int32), np.full(len(v), 0.6),
+                    np.tile([0.0, 0.0, 1.0], (len(v), 1)))
+    job = JobConfig().with_overrides(toolpath={"fit_ridge": fit})
+    res = compute_toolpath(layers, job, PROFILE, measure_baselines=False, workers=1)
+    assert np.all(res.toolpath.pattern[res.toolpath.extrude] == Pattern.CONTOUR)
+    cov = layer_coverage(layers, res.toolpath, max_samples=20_000)
+    assert res.report["extrusion_starts"]["total"] == 1
+    p90 = float(res.report["width_error"]["contour"]["p90"])
+    return float(cov.gap[0]), float(cov.overlap[0]), p90, float(res.report["layer_volume_error"])
+
+
+def test_fronts_meet_without_a_gap_or_a_doubled_line() -> None:
+    """A bar 2.7 W wide (a neck of a machined part): eq. 9's second ring lies 0.2 W from
+    its other side (doubled; width error p90 200 %). Fitted to the width, a ring and the
+    middle line at 2.7 / 3 W: the contour targets hold (width error p90 <= 10 %, gap and
+    overlap <= 3 % each) with the volume."""
+    v, f = strip(40.0, 6.3, 0.5)
+    gap0, overlap0, p90_0, _ = _contour_layer(v, f, False)
+    gap, overlap, p90, volume = _contour_layer(v, f, True)
+    assert p90 < p90_0 and gap + overlap < gap0 + overlap0
+    assert p90 <= 0.10
+    assert gap <= 0.03 and overlap <= 0.03
+    assert abs(volume) <= 0.01
