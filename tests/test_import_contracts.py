@@ -31,6 +31,11 @@ SLICER_INPUTS = frozenset({
 SLICER_EXCEPTIONS = frozenset({
     ("planner.preflight", "slicer.critical"),
     ("planner.preflight", "slicer.operators"),
+    # ... and its wall finding measures the walls against the slicer's narrowest line and
+    # names a size rounded as the slicer's thin-wall refusal rounds it
+    ("planner.preflight", "slicer.wall_thickness"),
+    ("planner.preflight_walls", "slicer.wall_thickness"),
+    ("planner.preflight_walls", "slicer.toolpath.thin_features"),
     # the normal-spike repair runs at the plan's input: in the toolpath stage it would change
     # saved toolpaths (docs/architecture.md); the printing directions the plan follows are
     # made in one place (planner.printability) for the plan and the slicing-time check
