@@ -10,6 +10,7 @@ file of one test came last and one worker ran it alone while the other sat idle)
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 
 import pytest
@@ -17,7 +18,9 @@ import pytest
 from sim.gl import choose_gl
 
 os.environ.setdefault("MPLBACKEND", "Agg")
-os.environ.setdefault("MESP_CACHE_DIR", tempfile.mkdtemp(prefix="mesp-test-cache-"))
+#: the session's tet-mesh cache, made here (the xdist workers inherit it) and removed at the end
+_CACHE_MADE = "" if "MESP_CACHE_DIR" in os.environ else tempfile.mkdtemp(prefix="mesp-test-cache-")
+os.environ.setdefault("MESP_CACHE_DIR", _CACHE_MADE)
 choose_gl()
 
 
@@ -30,3 +33,9 @@ def slow_files_first(items: list[pytest.Item]) -> None:
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     slow_files_first(items)
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    """The session's tet-mesh cache goes with it (it was left in /tmp, one per run)."""
+    if _CACHE_MADE:
+        shutil.rmtree(_CACHE_MADE, ignore_errors=True)

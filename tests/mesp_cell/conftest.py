@@ -75,16 +75,19 @@ class Console:
 
 
 @pytest.fixture(scope="session")
-def console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
+def console_cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
+    """The cell and its console, started once per test session (see ``console``)."""
     home = tmp_path_factory.mktemp("console_home")
     old = os.environ.get("MESP_HOME")
     os.environ["MESP_HOME"] = str(home)
     token = load_token(home, create=True)  # configured: motion endpoints need it on loopback
-    # the bundled sim launch, with a servo overrun watchdog that a loaded 2-core test host
-    # does not trip (the interlocks are test_safety's subject, not the console's)
+    # the bundled sim launch, with a servo overrun watchdog, a Modbus deadline and a staleness
+    # of the extruder's state that a loaded 2-core test host does not trip (at 150 ms the
+    # deadline interrupted prints under load; the interlocks are test_safety's subject, not
+    # the console's)
     try:  # the cell's processes take its home from the environment when they start
         launch = start_cell(bundled_launch("sim"), overrides={
-            "servo_overrun_s": 1.0,
+            "servo_overrun_s": 1.0, "extruder_deadline_s": 1.0, "extruder_fresh_s": 1.0,
             "slice_fn": "tests.mesp_cell.synthetic:slice_job",
             "plan_fn": "tests.mesp_cell.conftest:plan_at_home", "prime_s": 0.1,
             "robot_backend": "twin", "time_scale": 0.5, "console_port": "auto",
@@ -100,6 +103,19 @@ def console(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
             yield Console(launch, url, token, home, http)
     finally:
         launch.stop()
+
+
+@pytest.fixture
+def console(console_cell: Console) -> Iterator[Console]:
+    """The session's cell and console; after each test, every job it left unfinished is
+    aborted and a latched e-stop cleared, so that one failed test does not hold the queue
+    (one job waits at a time) for the tests after it."""
+    yield console_cell
+    c = console_cell
+    if c.http.get("/api/cell").json()["estop"]:
+        c.post("/api/estop/reset")
+    for job in c.http.get("/api/jobs", params={"all": False}).json():
+        c.post(f"/api/jobs/{job['id']}/abort")
 
 @pytest.fixture
 def ring(tmp_path: Path) -> Path:

@@ -33,6 +33,21 @@ def campaign(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Campaign]:
     c.stop()
 
 
+def fault_run(campaign: Campaign, fault: str, seed: int) -> Run:
+    """One run of ``fault``. A print that a loaded host's interlock (the controller's 150 ms
+    Modbus deadline) stopped before the fault was injected is no run of this fault: its job is
+    cleared and the run made again, at most twice."""
+    for _ in range(3):
+        try:
+            return campaign.run(fault, random.Random(seed))
+        except RuntimeError as exc:
+            if "before the fault" not in str(exc):
+                raise
+            print(f"no fault run, made again: {exc}")
+            campaign.clear()
+    raise AssertionError(f"3 prints ended before the {fault} fault was injected")
+
+
 def check(run: Run) -> None:
     print(run)
     assert run.stopped and run.resumed, run
@@ -42,7 +57,7 @@ def check(run: Run) -> None:
 
 
 def test_killed_extruder_node_stops_arm_and_screw_together(campaign: Campaign) -> None:
-    run = campaign.run("kill-extruder", random.Random(1))
+    run = fault_run(campaign, "kill-extruder", 1)
     assert run.motion_stop_s <= LIMIT_S, run
     # the robot stopped the screw on the controller directly, not at its 500 ms watchdog
     assert run.screw_stop_s <= LIMIT_S, run
@@ -50,7 +65,7 @@ def test_killed_extruder_node_stops_arm_and_screw_together(campaign: Campaign) -
 
 
 def test_estop_command_stops_the_cell(campaign: Campaign) -> None:
-    run = campaign.run("estop", random.Random(2))
+    run = fault_run(campaign, "estop", 2)
     # from the resident node's publish; the command's own start (the interpreter on a loaded
     # host) comes on top and is reported in docs/robustness.md
     assert run.motion_stop_s - run.command_s <= LIMIT_S, run

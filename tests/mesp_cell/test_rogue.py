@@ -91,14 +91,16 @@ def plan_by_name(job_dir: Path, cell_file: Path | None) -> dict[str, Any]:
 @pytest.fixture(scope="module")
 def cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Launch]:
     # the kinematic twin at 0.2x: a print lasts ~9 s (a slow model's ~35 s), time for forged
-    # messages to land during it; a servo overrun watchdog that a loaded 2-core host does not
-    # trip (the interlocks are test_safety's subject, not the bus's)
+    # messages to land during it; a servo overrun watchdog, a Modbus deadline and a staleness of
+    # the extruder's state that a loaded 2-core host does not trip (the interlocks are
+    # test_safety's subject, not the bus's)
     home = tmp_path_factory.mktemp("mesp_home")
     old = os.environ.get("MESP_HOME")
     os.environ["MESP_HOME"] = str(home)
     try:  # the cell's processes take their home from the environment when they start
         launch = start_cell(bundled_launch("sim"), overrides={
-            "servo_overrun_s": 1.0, "slice_fn": "tests.mesp_cell.synthetic:slice_job",
+            "servo_overrun_s": 1.0, "extruder_deadline_s": 1.0, "extruder_fresh_s": 1.0,
+            "slice_fn": "tests.mesp_cell.synthetic:slice_job",
             "plan_fn": "tests.mesp_cell.test_rogue:plan_by_name", "prime_s": 0.1,
             "robot_backend": "twin", "time_scale": 0.2})
     finally:

@@ -88,7 +88,7 @@ def model(tmp_path: Path) -> Path:
     return path
 
 
-def until(ready: Callable[[], bool], timeout: float = 2.0) -> bool:
+def until(ready: Callable[[], bool], timeout: float = 10.0) -> bool:
     """Poll ``ready`` until it holds or ``timeout`` s pass (bus messages land asynchronously)."""
     end = time.monotonic() + timeout
     while not ready() and time.monotonic() < end:
@@ -156,9 +156,7 @@ def test_killing_extruder_stops_robot_and_resume_completes(
     from mesp_cell.nodes import print_ledger
 
     assert stopped.waypoint == print_ledger.read(Path(stopped.dir)).last[0]
-    end = time.monotonic() + 2.0
-    while rec.waypoints[job.id][-1] != stopped.waypoint and time.monotonic() < end:
-        time.sleep(0.02)
+    until(lambda: rec.waypoints[job.id][-1] == stopped.waypoint)
     assert stopped.waypoint == rec.waypoints[job.id][-1]
     assert 0 < stopped.waypoint < max(ALL_WAYPOINTS)
     resume_and_finish(cell, client, rec, job.id, "extruder")
@@ -172,10 +170,18 @@ def test_killing_robot_stops_extruder(cell: Launch, client: CellClient, rec: Rec
     t_kill = time.time()
     os.kill(cell.pid("robot"), signal.SIGKILL)
     stopped = client.wait(job.id, timeout=10)
+    t_interrupted = time.time()
     assert stopped.state == "interrupted" and "robot" in stopped.reason
-    with rec.lock:
-        after = [(t, m) for t, m in rec.extruder if t > t_kill]
-    assert after and not after[-1][1].running, "the extruder kept running"
+
+    def sent_after(t0: float) -> list[ExtruderState]:
+        with rec.lock:
+            return [m for _, m in rec.extruder if m.t >= t0]
+
+    # the extruder's states sent once the job was interrupted: they may reach this test's
+    # recorder a little later on a loaded host; the motor is off in every one of them
+    assert until(lambda: bool(sent_after(t_interrupted))), "no extruder state after the stop"
+    assert sent_after(t_kill) and not any(m.running for m in sent_after(t_interrupted)), \
+        "the extruder kept running"
     resume_and_finish(cell, client, rec, job.id, "robot")
 
 
@@ -201,7 +207,8 @@ def test_estop_stops_both(cell: Launch, client: CellClient, rec: Recorder, model
     time.sleep(0.5)
     refused = client.status(job.id)
     assert refused.state == "interrupted" and not refused.resume
-    assert rec.robot.seq > seq and rec.robot.q == pytest.approx(q, abs=1e-6)
+    assert until(lambda: rec.robot is not None and rec.robot.seq > seq)  # a newer state
+    assert rec.robot.q == pytest.approx(q, abs=1e-6)
     assert client.reset_estop() == []
     resume_and_finish(cell, client, rec, job.id, "robot")
 

@@ -27,8 +27,14 @@ def job(tmp_path: Path) -> Path:
     return tmp_path
 
 
-def fast_twin() -> KinematicTwin:
-    return KinematicTwin(ServoConfig(time_scale=1000.0), q0=synthetic.HOME)
+#: s, the servo overrun watchdog of the twins here: a loaded 2-core host stalls a servo loop for
+#: over a second now and then (its default 0.1 s stopped these streams); the watchdog is
+#: test_a_stalled_servo_loop_stops_the_stream's subject
+LOADED_OVERRUN_S = 10.0
+
+
+def fast_twin(overrun_s: float = LOADED_OVERRUN_S) -> KinematicTwin:
+    return KinematicTwin(ServoConfig(time_scale=1000.0, overrun_s=overrun_s), q0=synthetic.HOME)
 
 
 def test_resampling_keeps_every_waypoint_in_order(job: Path) -> None:
@@ -126,7 +132,7 @@ def test_protective_stop_and_link_loss_end_the_stream(job: Path) -> None:
 
 def test_a_stalled_servo_loop_stops_the_stream(job: Path) -> None:
     plan = StreamPlan.load(job / "trajectory.npz", 0.002)
-    twin = fast_twin()
+    twin = fast_twin(overrun_s=1.0)  # longer than a loaded host's stalls, shorter than this one
     twin.connect()
 
     def stall(k: int) -> None:
@@ -164,7 +170,8 @@ def test_must_run_mask_short_travel_within_the_margin() -> None:
 
 def test_a_fast_twin_keeps_its_time_scale_without_spinning(job: Path) -> None:
     plan = StreamPlan.load(job / "trajectory.npz", 0.002)
-    twin = KinematicTwin(ServoConfig(time_scale=10.0), q0=synthetic.HOME)
+    twin = KinematicTwin(ServoConfig(time_scale=10.0, overrun_s=LOADED_OVERRUN_S),
+                         q0=synthetic.HOME)
     twin.connect()
     nominal = plan.samples * plan.dt / 10.0
     t0, c0 = time.perf_counter(), time.thread_time()
@@ -190,7 +197,8 @@ def test_mujoco_backend_tracks_the_stream(job: Path) -> None:
     from planner.cell import load_cell
 
     plan = StreamPlan.load(job / "trajectory.npz", 0.002)
-    twin = mujoco_twin(ServoConfig(time_scale=1000.0), q0=synthetic.HOME)
+    twin = mujoco_twin(ServoConfig(time_scale=1000.0, overrun_s=LOADED_OVERRUN_S),
+                       q0=synthetic.HOME)
     twin.connect()
     errors: list[float] = []
     result = ServoStream(twin, plan, 0, on_sample=lambda k: errors.append(

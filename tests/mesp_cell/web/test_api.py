@@ -130,8 +130,12 @@ def test_submit_confirm_progress_pause_resume_abort(console: Console, ring: Path
         assert "confirm the tank" in waiting["reason"]
         time.sleep(0.5)
         assert console.job(job_id)["state"] == "ready_check"  # nothing starts by itself
-        assert any(j["id"] == job_id and j["state"] == "ready_check"
-                   for m in rec.jobs for j in m["jobs"]), "the queue was not streamed"
+        end = time.monotonic() + 10.0  # the stream may lag the store on a loaded host
+        while not (streamed := any(j["id"] == job_id and j["state"] == "ready_check"
+                                   for m in list(rec.jobs) for j in m["jobs"])) and (
+                time.monotonic() < end):
+            time.sleep(0.05)
+        assert streamed, "the queue was not streamed"
         r = console.post(f"/api/jobs/{job_id}/ready")
         assert r.status_code == 200, r.text
         console.wait(job_id, ("printing",), percent=20.0)
