@@ -76,10 +76,12 @@ def test_twin_print_records_the_published_states(tmp_path: Path,
         assert main(["job", "submit", str(model)]) == 0
         job_id = capsys.readouterr().out.split()[1]
         client.confirm_ready(job_id, timeout=120.0)  # the operator confirms the tank
-        # on a loaded machine the robot's servo watchdog may interrupt the print: the stream
-        # then ends "stopped", which closes the recording just the same
+        # on a loaded machine the robot's servo watchdog may interrupt the print, or the
+        # print check fail it at the end (ink at 4x on a 10 mm^3 part): the stream ends just
+        # the same, and so does the recording, which is what this test checks (the print's
+        # own verdict is test_safety's and test_demo's)
         state = client.wait(job_id, timeout=120.0).state
-        assert state in ("done", "interrupted"), client.status(job_id)
+        assert state in ("done", "interrupted", "failed"), client.status(job_id).reason
         mcap = Path(client.status(job_id).dir) / "telemetry.mcap"
         _wait(lambda: read_counts(mcap) is not None, 30.0, f"{mcap} not finished")
         counts = read_counts(mcap)
