@@ -33,6 +33,7 @@ from slicer.toolpath.resample import (
     resample_lines,
 )
 from slicer.toolpath.results import Waypoints
+from slicer.toolpath.stripe_joins import JOIN_SCALE, narrow_joins
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
 TINY_LOOP = 2.0  # closed lines shorter than this x W are dropped (a blob, not a loop)
@@ -205,15 +206,29 @@ class Component:
         linked = link_pieces(lines, pieces, self.vertices, self.faces, self.graph, w_rs,
                              lifter, lift, factor, joiner,
                              spiral=self.cfg.spiral_rings and level is not None)
-        return Built(lines, linked, self._waypoints(linked, scale), scale=scale)
+        narrow = None
+        if level is None and trim_distance is not None and self.cfg.narrow_joins:
+            # stripe joins inside the layer lie over the stripes: printed narrow
+            on = linked.face >= 0
+            dist = np.full(len(linked.points), np.inf)
+            dist[on] = interpolate(trim_distance, self.faces, linked.face[on], linked.bary[on])
+            linked, narrow = narrow_joins(linked, dist, spacing)
+        return Built(lines, linked, self._waypoints(linked, scale, narrow), scale=scale)
 
-    def _waypoints(self, linked: LinkedPath, scale: NDArray[np.float64] | None = None
-                   ) -> Waypoints:
+    def _waypoints(self, linked: LinkedPath, scale: NDArray[np.float64] | None = None,
+                   narrow: NDArray[np.bool_] | None = None) -> Waypoints:
+        """Process values at the linked points; ``narrow`` (N,) bool: points of joins
+        printed at JOIN_SCALE x their width (``stripe_joins``: the speed sets it)."""
         n = len(linked.points)
         h, v, w = np.zeros(n), np.zeros(n), np.zeros(n)
         normal = linked.normal.copy()
         on = linked.face >= 0
         h[on], v[on], w[on] = self.values_at(linked.face[on], linked.bary[on], scale)
+        if narrow is not None and narrow.any():
+            thin = narrow & on
+            fast = self.flowed_speed(v[thin], JOIN_SCALE, self.profile.speed_at(h[thin]))
+            w[thin] *= v[thin] / fast
+            v[thin] = fast
         normal[on] = point_normals(self.vertex_normals, self.faces, self.normals,
                                    linked.face[on], linked.bary[on])
         if np.any(~on) and np.any(on):

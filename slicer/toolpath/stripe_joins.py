@@ -1,0 +1,89 @@
+"""Stripe joins inside the layer printed narrow.
+
+The stripe ordering joins line ends into chains (``ordering._order_cover``). At the rim a
+join is a U-turn along the boundary and fills the strip between the stripe ends and the
+boundary. Inside the layer, where a stripe ends at a branch point or a converging end was
+cut back, the join runs from that end to a neighbour's end over the stripes beside it:
+most of its band lies on material the stripes already lay, so its ink is laid twice, and
+the volume match takes that ink from every line of the layer (spacing tau > 1: a strip
+along every stripe stays bare). ``narrow_joins`` marks such joins so that they print at
+JOIN_SCALE x the width (the nozzle speed sets it, W = C / (H v)): the path still runs on
+without a new extrusion start, and laying half the ink there leaves it to the lines.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from slicer.toolpath.linking import LinkedPath
+
+JOIN_SCALE = 0.5  # width of an inside join over the width of the lines it joins
+JOIN_RIM = 1.0  # x spacing: a join with both ends nearer the boundary is a rim U-turn
+JOIN_TAPER = 0.1  # x the join's length: where its narrow part starts and ends
+
+
+def narrow_joins(linked: LinkedPath, boundary_distance: NDArray[np.float64], spacing: float
+                 ) -> tuple[LinkedPath, NDArray[np.bool_]]:
+    """``linked`` with a point added just inside each end of every join that is no rim
+    U-turn (an end at least JOIN_RIM x ``spacing`` from the boundary), and the (N',) bool
+    mask of the points that print narrow (those added and the join's own points between).
+
+    boundary_distance: (N,) float64, distance of each linked point from the component's
+    boundary (in the units of ``spacing``; any value for travel points). A line end keeps
+    its width, so the line's last segment is not tapered; the join's short first and last
+    parts (JOIN_TAPER of its length) taper from the line's width to the narrow one.
+    """
+    n = len(linked.points)
+    narrow = np.zeros(n, dtype=bool)
+    if n < 2:
+        return linked, narrow
+    conn = linked.connector_segments()
+    edge = np.diff(np.concatenate([[0], conn.astype(np.int8), [0]]))
+    first = np.flatnonzero(edge == 1)  # run of connector segments from point first ...
+    last = np.flatnonzero(edge == -1)  # ... to point last
+    inside = ((boundary_distance[first] >= JOIN_RIM * spacing)
+              | (boundary_distance[last] >= JOIN_RIM * spacing))
+    first, last = first[inside], last[inside]
+    if len(first) == 0:
+        return linked, narrow
+    p = linked.points
+    step = np.linalg.norm(np.diff(p, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(step)])
+    length = arc[last] - arc[first]
+    keep = length > 0
+    first, last, length = first[keep], last[keep], length[keep]
+    # the added points: JOIN_TAPER of the join's length in from each end, on its first
+    # and last segment (at most half of either)
+    d_a = np.minimum(JOIN_TAPER * length, 0.5 * step[first])
+    d_b = np.minimum(JOIN_TAPER * length, 0.5 * step[last - 1])
+    u_a = (p[first + 1] - p[first]) / np.maximum(step[first], 1e-300)[:, None]
+    u_b = (p[last] - p[last - 1]) / np.maximum(step[last - 1], 1e-300)[:, None]
+    new_a = p[first] + d_a[:, None] * u_a
+    new_b = p[last] - d_b[:, None] * u_b
+    # inserted after point first and before point last (np.insert keeps the given order
+    # for equal positions, so a one-segment join gets a then b)
+    where = np.concatenate([first + 1, last])
+    order = np.argsort(where, kind="stable")
+    where = where[order]
+    src = np.concatenate([first, last])[order]  # the line end each added point copies
+    points = np.insert(p, where, np.concatenate([new_a, new_b])[order], axis=0)
+    out = LinkedPath(
+        points=points,
+        face=np.insert(linked.face, where, linked.face[src]),
+        bary=np.insert(linked.bary, where, linked.bary[src], axis=0),
+        normal=np.insert(linked.normal, where, linked.normal[src], axis=0),
+        extrude=np.insert(linked.extrude, where, linked.extrude[src]),
+        path=np.insert(linked.path, where, linked.path[src]),
+        piece=np.insert(linked.piece, where, np.full(len(src), -1, dtype=np.int32)),
+    )
+    # new index of every old point, then the span of each join (its own interior points
+    # and the two added ones) is narrow
+    shift = np.zeros(n + 1, dtype=np.int64)
+    np.add.at(shift, where, 1)
+    new_index = np.arange(n) + np.cumsum(shift)[:n]
+    mark = np.zeros(len(points) + 1, dtype=np.int64)
+    np.add.at(mark, new_index[first] + 1, 1)
+    np.add.at(mark, new_index[last], -1)
+    narrow_new = np.cumsum(mark)[:-1] > 0
+    return out, narrow_new
