@@ -33,7 +33,7 @@ from slicer.toolpath.resample import (
     resample_lines,
 )
 from slicer.toolpath.results import Waypoints
-from slicer.toolpath.stripe_joins import JOIN_SCALE, narrow_joins
+from slicer.toolpath.stripe_joins import JOIN_SCALE, RIM_INSET, narrow_joins
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
 TINY_LOOP = 2.0  # closed lines shorter than this x W are dropped (a blob, not a loop)
@@ -173,9 +173,10 @@ class Component:
             _, _, w_pt = self.values_at(lines.face, lines.bary, scale)
         trim = None
         if trim_distance is not None and lines.n_lines:
-            # An open line ending on the boundary stops half a width inside it: its band of
-            # material then ends at the boundary, and the U-turn connector to the next line
-            # runs along the boundary inside the layer (not half outside it).
+            # An open line ending on the boundary stops half a width inside it (a quarter
+            # with ``narrow_joins``: the U-turn prints at half width): the U-turn connector
+            # to the next line then runs along the boundary inside the layer, its band
+            # ending at the boundary (not half outside it).
             idx = line_index(lines)
             ends = np.stack([idx.start, np.maximum(idx.stop - 1, idx.start)], axis=1)
             d_end = interpolate(trim_distance, self.faces, lines.face[ends.ravel()],
@@ -183,7 +184,8 @@ class Component:
             # (at most a quarter of the line per end: a short stripe across a narrow band
             # keeps half its length rather than vanishing)
             cap = 0.25 * line_lengths(lines)[:, None]
-            trim = np.where(d_end < 0.25 * spacing, np.minimum(0.5 * w_pt[ends], cap), 0.0)
+            inset = RIM_INSET if self.cfg.narrow_joins else 0.5
+            trim = np.where(d_end < 0.25 * spacing, np.minimum(inset * w_pt[ends], cap), 0.0)
         lines = resample_lines(lines, self.vertices, self.faces, self.cfg.waypoint_spacing * w_pt,
                                neighbours=self.neighbours, trim=trim)
         lines = drop_short_lines(lines, self.cfg.min_path_length_mm)
@@ -208,11 +210,8 @@ class Component:
                              spiral=self.cfg.spiral_rings and level is not None)
         narrow = None
         if level is None and trim_distance is not None and self.cfg.narrow_joins:
-            # stripe joins inside the layer lie over the stripes: printed narrow
-            on = linked.face >= 0
-            dist = np.full(len(linked.points), np.inf)
-            dist[on] = interpolate(trim_distance, self.faces, linked.face[on], linked.bary[on])
-            linked, narrow = narrow_joins(linked, dist, spacing)
+            # stripe joins lie half or more over the stripes they join: printed narrow
+            linked, narrow = narrow_joins(linked)
         return Built(lines, linked, self._waypoints(linked, scale, narrow), scale=scale)
 
     def _waypoints(self, linked: LinkedPath, scale: NDArray[np.float64] | None = None,

@@ -1,14 +1,16 @@
-"""Stripe joins inside the layer printed narrow.
+"""Stripe joins printed at half width, and stripe ends at the rim a quarter width inside it.
 
-The stripe ordering joins line ends into chains (``ordering._order_cover``). At the rim a
-join is a U-turn along the boundary and fills the strip between the stripe ends and the
-boundary. Inside the layer, where a stripe ends at a branch point or a converging end was
-cut back, the join runs from that end to a neighbour's end over the stripes beside it:
-most of its band lies on material the stripes already lay, so its ink is laid twice, and
-the volume match takes that ink from every line of the layer (spacing tau > 1: a strip
-along every stripe stays bare). ``narrow_joins`` marks such joins so that they print at
-JOIN_SCALE x the width (the nozzle speed sets it, W = C / (H v)): the path still runs on
-without a new extrusion start, and laying half the ink there leaves it to the lines.
+The stripe ordering joins line ends into chains (``ordering._order_cover``): U-turns along
+the boundary, and inside the layer joins from a stripe that ends at a branch point (or a
+converging end cut back) to a neighbour's end. A join's band at the full width lies half
+or more on the stripes it joins: a U-turn's chord between two stripe ends half a width
+inside the boundary covers the last half width of both stripes again (about W^2 / 2 per
+turn), an inside join runs over the stripes beside it. That ink is laid twice, and the
+volume match takes it from every line of the layer (spacing tau > 1: a strip along every
+stripe stays bare). Joins therefore print at JOIN_SCALE x the width (the nozzle speed sets
+it, W = C / (H v)), and an open stripe end at the boundary stops JOIN_SCALE x W / 2 inside
+it (``RIM_INSET``), so that the narrow U-turn's band ends at the boundary: the path runs
+on without a new extrusion start, and the ink goes to the lines.
 """
 
 from __future__ import annotations
@@ -18,21 +20,19 @@ from numpy.typing import NDArray
 
 from slicer.toolpath.linking import LinkedPath
 
-JOIN_SCALE = 0.5  # width of an inside join over the width of the lines it joins
-JOIN_RIM = 1.0  # x spacing: a join with both ends nearer the boundary is a rim U-turn
+JOIN_SCALE = 0.5  # width of a join over the width of the lines it joins
+RIM_INSET = 0.5 * JOIN_SCALE  # x W: how far inside the boundary an open stripe end stops
 JOIN_TAPER = 0.1  # x the join's length: where its narrow part starts and ends
 
 
-def narrow_joins(linked: LinkedPath, boundary_distance: NDArray[np.float64], spacing: float
-                 ) -> tuple[LinkedPath, NDArray[np.bool_]]:
-    """``linked`` with a point added just inside each end of every join that is no rim
-    U-turn (an end at least JOIN_RIM x ``spacing`` from the boundary), and the (N',) bool
-    mask of the points that print narrow (those added and the join's own points between).
+def narrow_joins(linked: LinkedPath) -> tuple[LinkedPath, NDArray[np.bool_]]:
+    """``linked`` with a point added just inside each end of every join (a run of
+    connector segments, ``LinkedPath.connector_segments``), and the (N',) bool mask of the
+    points that print narrow: those added and the join's own points between them.
 
-    boundary_distance: (N,) float64, distance of each linked point from the component's
-    boundary (in the units of ``spacing``; any value for travel points). A line end keeps
-    its width, so the line's last segment is not tapered; the join's short first and last
-    parts (JOIN_TAPER of its length) taper from the line's width to the narrow one.
+    A line end keeps its width, so the line's last segment is not tapered; the join's
+    short first and last parts (JOIN_TAPER of its length) taper from the line's width to
+    the narrow one.
     """
     n = len(linked.points)
     narrow = np.zeros(n, dtype=bool)
@@ -42,9 +42,6 @@ def narrow_joins(linked: LinkedPath, boundary_distance: NDArray[np.float64], spa
     edge = np.diff(np.concatenate([[0], conn.astype(np.int8), [0]]))
     first = np.flatnonzero(edge == 1)  # run of connector segments from point first ...
     last = np.flatnonzero(edge == -1)  # ... to point last
-    inside = ((boundary_distance[first] >= JOIN_RIM * spacing)
-              | (boundary_distance[last] >= JOIN_RIM * spacing))
-    first, last = first[inside], last[inside]
     if len(first) == 0:
         return linked, narrow
     p = linked.points
