@@ -148,8 +148,8 @@ class Component:
     def build(self, lines_found: SurfaceLines, level_of: NDArray[np.float64] | None,
               spacing: float, start: NDArray[np.float64], lifter: Lifter, lift: float,
               trim_distance: NDArray[np.float64] | None = None, link: bool = True,
-              join: float | None = None, scale: NDArray[np.float64] | None = None
-              ) -> Built:
+              join: float | None = None, scale: NDArray[np.float64] | None = None,
+              narrow: bool | None = None) -> Built:
         """Map back, drop short fragments, resample, order, link; values per waypoint.
 
         Args:
@@ -163,7 +163,10 @@ class Component:
             link: False stops after resampling (lines only: for width measurements).
             join: connectors up to this x W extrude (default: the config's join_factor).
             scale: (n,) per-vertex factor on W the lines print at (``values_at``), or None.
+            narrow: stripes (``trim_distance`` given): joins at half width
+                (``stripe_joins``); default: the config's narrow_joins.
         """
+        narrow_on = self.cfg.narrow_joins if narrow is None else narrow
         lines = map_back(lines_found, self.vertices, self.faces)
         lines = drop_short_lines(lines, self.cfg.min_path_length_mm)
         _, _, w_pt = self.values_at(lines.face, lines.bary, scale)
@@ -184,7 +187,7 @@ class Component:
             # (at most a quarter of the line per end: a short stripe across a narrow band
             # keeps half its length rather than vanishing)
             cap = 0.25 * line_lengths(lines)[:, None]
-            inset = RIM_INSET if self.cfg.narrow_joins else 0.5
+            inset = RIM_INSET if narrow_on else 0.5
             trim = np.where(d_end < 0.25 * spacing, np.minimum(inset * w_pt[ends], cap), 0.0)
         lines = resample_lines(lines, self.vertices, self.faces, self.cfg.waypoint_spacing * w_pt,
                                neighbours=self.neighbours, trim=trim)
@@ -209,9 +212,9 @@ class Component:
                              lifter, lift, factor, joiner,
                              spiral=self.cfg.spiral_rings and level is not None)
         narrow = None
-        if level is None and trim_distance is not None and self.cfg.narrow_joins:
+        if level is None and trim_distance is not None and narrow_on:
             # stripe joins lie half or more over the stripes they join: printed narrow
-            linked, narrow = narrow_joins(linked)
+            linked, narrow = narrow_joins(linked, self.vertices, self.faces)
         return Built(lines, linked, self._waypoints(linked, scale, narrow), scale=scale)
 
     def _waypoints(self, linked: LinkedPath, scale: NDArray[np.float64] | None = None,

@@ -16,19 +16,45 @@ on without a new extrusion start, and the ink goes to the lines.
 from __future__ import annotations
 
 import numpy as np
+import trimesh
 from numpy.typing import NDArray
+from scipy.spatial import cKDTree
 
+from core.tolerance import tol
 from slicer.toolpath.linking import LinkedPath
+from slicer.toolpath.mapback import barycentric
 
 JOIN_SCALE = 0.5  # width of a join over the width of the lines it joins
 RIM_INSET = 0.5 * JOIN_SCALE  # x W: how far inside the boundary an open stripe end stops
 JOIN_TAPER = 0.1  # x the join's length: where its narrow part starts and ends
+NEAREST_FACES = 8  # candidate faces when locating an added point on the layer
 
 
-def narrow_joins(linked: LinkedPath) -> tuple[LinkedPath, NDArray[np.bool_]]:
+def locate(points: NDArray[np.float64], vertices: NDArray[np.float64],
+           faces: NDArray[np.int32]) -> tuple[NDArray[np.int32], NDArray[np.float64]]:
+    """Face (P,) and barycentrics (P, 3) of the layer point nearest to each of ``points``
+    ((P, 3) mm), among the NEAREST_FACES faces whose centroids are nearest."""
+    tri = vertices[faces]
+    k = min(NEAREST_FACES, len(faces))
+    _, cand = cKDTree(tri.mean(axis=1)).query(points, k=k)
+    cand = np.asarray(cand).reshape(len(points), k)
+    rep = np.repeat(points, k, axis=0)
+    closest = trimesh.triangles.closest_point(tri[cand.ravel()], rep)
+    d = np.linalg.norm(closest - rep, axis=1).reshape(len(points), k)
+    best = np.argmin(np.where(np.isfinite(d), d, np.inf), axis=1)
+    face = cand[np.arange(len(points)), best].astype(np.int32)
+    q = closest.reshape(len(points), k, 3)[np.arange(len(points)), best]
+    bary = np.clip(barycentric(q, vertices, faces, face), 0.0, None)
+    return face, bary / np.maximum(bary.sum(axis=1, keepdims=True), tol.zero)
+
+
+def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArray[np.int32]
+                 ) -> tuple[LinkedPath, NDArray[np.bool_]]:
     """``linked`` with a point added just inside each end of every join (a run of
     connector segments, ``LinkedPath.connector_segments``), and the (N',) bool mask of the
-    points that print narrow: those added and the join's own points between them.
+    points that print narrow: those added and the join's own points between them. The
+    added points take the face and barycentrics of the nearest point of the layer
+    (``vertices`` (n, 3) mm, ``faces`` (m, 3)), which sets their process values.
 
     A line end keeps its width, so the line's last segment is not tapered; the join's
     short first and last parts (JOIN_TAPER of its length) taper from the line's width to
@@ -64,11 +90,13 @@ def narrow_joins(linked: LinkedPath) -> tuple[LinkedPath, NDArray[np.bool_]]:
     order = np.argsort(where, kind="stable")
     where = where[order]
     src = np.concatenate([first, last])[order]  # the line end each added point copies
-    points = np.insert(p, where, np.concatenate([new_a, new_b])[order], axis=0)
+    added = np.concatenate([new_a, new_b])[order]
+    points = np.insert(p, where, added, axis=0)
+    face, bary = locate(added, vertices, faces)
     out = LinkedPath(
         points=points,
-        face=np.insert(linked.face, where, linked.face[src]),
-        bary=np.insert(linked.bary, where, linked.bary[src], axis=0),
+        face=np.insert(linked.face, where, face),
+        bary=np.insert(linked.bary, where, bary, axis=0),
         normal=np.insert(linked.normal, where, linked.normal[src], axis=0),
         extrude=np.insert(linked.extrude, where, linked.extrude[src]),
         path=np.insert(linked.path, where, linked.path[src]),
