@@ -31,9 +31,10 @@ NEAREST_FACES = 8  # candidate faces when locating an added point on the layer
 
 
 def locate(points: NDArray[np.float64], vertices: NDArray[np.float64],
-           faces: NDArray[np.int32]) -> tuple[NDArray[np.int32], NDArray[np.float64]]:
-    """Face (P,) and barycentrics (P, 3) of the layer point nearest to each of ``points``
-    ((P, 3) mm), among the NEAREST_FACES faces whose centroids are nearest."""
+           faces: NDArray[np.int32]
+           ) -> tuple[NDArray[np.float64], NDArray[np.int32], NDArray[np.float64]]:
+    """The layer point nearest to each of ``points`` ((P, 3) mm), among the NEAREST_FACES
+    faces whose centroids are nearest: (P, 3) mm, its face (P,) and barycentrics (P, 3)."""
     tri = vertices[faces]
     k = min(NEAREST_FACES, len(faces))
     _, cand = cKDTree(tri.mean(axis=1)).query(points, k=k)
@@ -45,7 +46,8 @@ def locate(points: NDArray[np.float64], vertices: NDArray[np.float64],
     face = cand[np.arange(len(points)), best].astype(np.int32)
     q = closest.reshape(len(points), k, 3)[np.arange(len(points)), best]
     bary = np.clip(barycentric(q, vertices, faces, face), 0.0, None)
-    return face, bary / np.maximum(bary.sum(axis=1, keepdims=True), tol.zero)
+    bary /= np.maximum(bary.sum(axis=1, keepdims=True), tol.zero)
+    return np.einsum("pk,pkj->pj", bary, vertices[faces[face]]), face, bary
 
 
 def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArray[np.int32]
@@ -53,8 +55,8 @@ def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArr
     """``linked`` with a point added just inside each end of every join (a run of
     connector segments, ``LinkedPath.connector_segments``), and the (N',) bool mask of the
     points that print narrow: those added and the join's own points between them. The
-    added points take the face and barycentrics of the nearest point of the layer
-    (``vertices`` (n, 3) mm, ``faces`` (m, 3)), which sets their process values.
+    added points lie on the layer (``vertices`` (n, 3) mm, ``faces`` (m, 3)): the point
+    nearest to the join's line there, with its face and barycentrics.
 
     A line end keeps its width, so the line's last segment is not tapered; the join's
     short first and last parts (JOIN_TAPER of its length) taper from the line's width to
@@ -90,9 +92,8 @@ def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArr
     order = np.argsort(where, kind="stable")
     where = where[order]
     src = np.concatenate([first, last])[order]  # the line end each added point copies
-    added = np.concatenate([new_a, new_b])[order]
+    added, face, bary = locate(np.concatenate([new_a, new_b])[order], vertices, faces)
     points = np.insert(p, where, added, axis=0)
-    face, bary = locate(added, vertices, faces)
     out = LinkedPath(
         points=points,
         face=np.insert(linked.face, where, face),
