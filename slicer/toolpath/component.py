@@ -211,11 +211,11 @@ class Component:
         linked = link_pieces(lines, pieces, self.vertices, self.faces, self.graph, w_rs,
                              lifter, lift, factor, joiner,
                              spiral=self.cfg.spiral_rings and level is not None)
-        narrow = None
+        thin = None
         if level is None and trim_distance is not None and narrow_on:
             # stripe joins lie half or more over the stripes they join: printed narrow
-            linked, narrow = narrow_joins(linked, self.vertices, self.faces)
-        return Built(lines, linked, self._waypoints(linked, scale, narrow), scale=scale)
+            linked, thin = narrow_joins(linked, self.vertices, self.faces)
+        return Built(lines, linked, self._waypoints(linked, scale, thin), scale=scale)
 
     def _waypoints(self, linked: LinkedPath, scale: NDArray[np.float64] | None = None,
                    narrow: NDArray[np.bool_] | None = None) -> Waypoints:
