@@ -34,6 +34,7 @@ from slicer.toolpath.line_source import LineSource
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.linking import Lifter
 from slicer.toolpath.results import ComponentResult, Waypoints
+from slicer.toolpath.stripe_joins import coverage_miss
 from slicer.toolpath.surface import boundary_edges
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 from slicer.toolpath.tip_line import tip_line
@@ -196,11 +197,12 @@ def _component_toolpath_unsafe(
         if used == Pattern.STRIPE and cfg.narrow_joins and match.tau < 1.0:
             # Narrow joins leave their ink to the lines (``stripe_joins``); where the lines
             # then lie closer than their width (tau < 1: spots of the layer no stripe
-            # reaches, e.g. between holes and the edge), joins at full width take that ink
-            # instead: whichever keeps the lines nearer to abutting (tau nearer to 1)
+            # reaches, e.g. between holes and the edge), joins at full width may place that
+            # ink better: whichever leaves the smaller of the worse of gap and overlap
             full = run(surface, used, join=join, narrow=False)
-            if abs(full.tau - 1.0) < abs(match.tau - 1.0) and (
-                    abs(full.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))):
+            if (abs(full.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
+                    and coverage_miss(comp.vertices, comp.faces, full.result.waypoints)
+                    < coverage_miss(comp.vertices, comp.faces, match.result.waypoints)):
                 match = full
         return match
 

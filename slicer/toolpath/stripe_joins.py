@@ -20,9 +20,12 @@ import trimesh
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from core.stages import Layers, Pattern, Toolpath
 from core.tolerance import tol
+from slicer.toolpath.coverage import layer_coverage
 from slicer.toolpath.linking import LinkedPath
 from slicer.toolpath.mapback import barycentric
+from slicer.toolpath.results import Waypoints
 
 JOIN_SCALE = 0.5  # width of a join over the width of the lines it joins
 RIM_INSET = 0.5 * JOIN_SCALE  # x W: how far inside the boundary an open stripe end stops
@@ -113,3 +116,24 @@ def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArr
     np.add.at(mark, new_index[last], -1)
     narrow_new = np.cumsum(mark)[:-1] > 0
     return out, narrow_new
+
+
+def coverage_miss(vertices: NDArray[np.float64], faces: NDArray[np.int32],
+                  waypoints: Waypoints) -> float:
+    """The larger of the gap and the overlap (area fractions, ``coverage.layer_coverage``)
+    of one component's ``waypoints`` on its surface (``vertices`` (n, 3) mm, ``faces``
+    (m, 3)): what decides between narrow and full-width joins where narrow ones leave the
+    lines closer than their width."""
+    n, m = len(waypoints.position), len(faces)
+    if n < 2 or m == 0:
+        return 1.0
+    surface = Layers(vertices, faces, np.zeros(m, np.int32), np.ones(len(vertices)),
+                     np.tile([0.0, 0.0, 1.0], (len(vertices), 1)))
+    normal = waypoints.normal / np.maximum(np.linalg.norm(waypoints.normal, axis=1),
+                                           tol.zero)[:, None]
+    tp = Toolpath(position=waypoints.position, normal=normal, layer=np.zeros(n, np.int32),
+                  path=waypoints.path, height=waypoints.height, width=waypoints.width,
+                  speed=waypoints.speed, extrude=waypoints.extrude,
+                  pattern=np.full(n, Pattern.STRIPE, np.int8))
+    cov = layer_coverage(surface, tp)
+    return float(max(cov.gap[0], cov.overlap[0]))
