@@ -10,7 +10,10 @@ volume match takes it from every line of the layer (spacing tau > 1: a strip alo
 stripe stays bare). Joins therefore print at JOIN_SCALE x the width (the nozzle speed sets
 it, W = C / (H v)), and an open stripe end at the boundary stops JOIN_SCALE x W / 2 inside
 it (``RIM_INSET``), so that the narrow U-turn's band ends at the boundary: the path runs
-on without a new extrusion start, and the ink goes to the lines.
+on without a new extrusion start, and the ink goes to the lines. Where the lines then lie
+closer than their width (spots no stripe reaches, e.g. between holes and the edge), the
+component is also built with full-width joins and keeps the one whose worse of gap and
+overlap (``coverage_miss``) is smaller (``strategy``).
 """
 
 from __future__ import annotations

@@ -14,7 +14,8 @@ from slicer.extrusion import load_profile
 from slicer.toolpath.build import compute_toolpath
 from slicer.toolpath.coverage import layer_coverage
 from slicer.toolpath.linking import LinkedPath
-from slicer.toolpath.stripe_joins import JOIN_SCALE, JOIN_TAPER, narrow_joins
+from slicer.toolpath.results import Waypoints
+from slicer.toolpath.stripe_joins import JOIN_SCALE, JOIN_TAPER, coverage_miss, narrow_joins
 from tests.slicer.toolpath.pattern_meshes import disc, flat_mesh
 
 PROFILE = load_profile("ecoflex-0030")
@@ -57,6 +58,25 @@ def test_each_join_gets_a_point_inside_either_end_and_prints_narrow() -> None:
                                            np.zeros((3, 3)), np.ones(3, bool),
                                            np.zeros(3, np.int32), np.zeros(3, np.int32)), v, f)
     assert len(single.points) == 3 and not none.any()
+
+
+def test_coverage_miss_is_the_worse_of_gap_and_overlap() -> None:
+    # five lines across the 10 mm square, 2 mm apart: 2 mm wide they tile it, 1 mm wide
+    # they leave half of it bare, 3 mm wide they cover half of it twice
+    v, f = _square()
+    x = np.repeat(np.arange(1.0, 10.0, 2.0), 2)
+    pts = np.column_stack([x, np.tile([0.0, 10.0], 5), np.zeros(10)])
+    path = np.repeat(np.arange(5), 2).astype(np.int32)
+
+    def miss(width: float) -> float:
+        wp = Waypoints(pts, np.tile([0.0, 0.0, 1.0], (10, 1)), np.full(10, 0.6),
+                       np.full(10, width), np.full(10, 5.0), np.ones(10, bool), path,
+                       np.ones(10, np.int8))
+        return coverage_miss(v, f, wp)
+
+    assert miss(2.0) < 0.02
+    assert miss(1.0) == pytest.approx(0.5, abs=0.04)
+    assert miss(3.0) == pytest.approx(0.4, abs=0.04)
 
 
 def _rectangle(a: float, b: float, h: float) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
