@@ -178,6 +178,7 @@ class ToolpathConfig:
     min_path_length_mm: float = _JOB["toolpath"]["min_path_length_mm"]
     join_factor: float = _JOB["toolpath"]["join_factor"]
     spiral_rings: bool = _JOB["toolpath"]["spiral_rings"]
+    narrow_joins: bool = _JOB["toolpath"]["narrow_joins"]
     fit_bands: bool = _JOB["toolpath"]["fit_bands"]
     fit_ridge: bool = _JOB["toolpath"]["fit_ridge"]
     pitch_width: bool = _JOB["toolpath"]["pitch_width"]

@@ -33,6 +33,7 @@ from slicer.toolpath.resample import (
     resample_lines,
 )
 from slicer.toolpath.results import Waypoints
+from slicer.toolpath.stripe_joins import JOIN_SCALE, RIM_INSET, narrow_joins
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
 TINY_LOOP = 2.0  # closed lines shorter than this x W are dropped (a blob, not a loop)
@@ -147,8 +148,8 @@ class Component:
     def build(self, lines_found: SurfaceLines, level_of: NDArray[np.float64] | None,
               spacing: float, start: NDArray[np.float64], lifter: Lifter, lift: float,
               trim_distance: NDArray[np.float64] | None = None, link: bool = True,
-              join: float | None = None, scale: NDArray[np.float64] | None = None
-              ) -> Built:
+              join: float | None = None, scale: NDArray[np.float64] | None = None,
+              narrow: bool | None = None) -> Built:
         """Map back, drop short fragments, resample, order, link; values per waypoint.
 
         Args:
@@ -162,7 +163,10 @@ class Component:
             link: False stops after resampling (lines only: for width measurements).
             join: connectors up to this x W extrude (default: the config's join_factor).
             scale: (n,) per-vertex factor on W the lines print at (``values_at``), or None.
+            narrow: stripes (``trim_distance`` given): joins at half width
+                (``stripe_joins``); default: the config's narrow_joins.
         """
+        narrow_on = self.cfg.narrow_joins if narrow is None else narrow
         lines = map_back(lines_found, self.vertices, self.faces)
         lines = drop_short_lines(lines, self.cfg.min_path_length_mm)
         _, _, w_pt = self.values_at(lines.face, lines.bary, scale)
@@ -172,9 +176,10 @@ class Component:
             _, _, w_pt = self.values_at(lines.face, lines.bary, scale)
         trim = None
         if trim_distance is not None and lines.n_lines:
-            # An open line ending on the boundary stops half a width inside it: its band of
-            # material then ends at the boundary, and the U-turn connector to the next line
-            # runs along the boundary inside the layer (not half outside it).
+            # An open line ending on the boundary stops half a width inside it (a quarter
+            # with ``narrow_joins``: the U-turn prints at half width): the U-turn connector
+            # to the next line then runs along the boundary inside the layer, its band
+            # ending at the boundary (not half outside it).
             idx = line_index(lines)
             ends = np.stack([idx.start, np.maximum(idx.stop - 1, idx.start)], axis=1)
             d_end = interpolate(trim_distance, self.faces, lines.face[ends.ravel()],
@@ -182,7 +187,8 @@ class Component:
             # (at most a quarter of the line per end: a short stripe across a narrow band
             # keeps half its length rather than vanishing)
             cap = 0.25 * line_lengths(lines)[:, None]
-            trim = np.where(d_end < 0.25 * spacing, np.minimum(0.5 * w_pt[ends], cap), 0.0)
+            inset = RIM_INSET if narrow_on else 0.5
+            trim = np.where(d_end < 0.25 * spacing, np.minimum(inset * w_pt[ends], cap), 0.0)
         lines = resample_lines(lines, self.vertices, self.faces, self.cfg.waypoint_spacing * w_pt,
                                neighbours=self.neighbours, trim=trim)
         lines = drop_short_lines(lines, self.cfg.min_path_length_mm)
@@ -205,15 +211,26 @@ class Component:
         linked = link_pieces(lines, pieces, self.vertices, self.faces, self.graph, w_rs,
                              lifter, lift, factor, joiner,
                              spiral=self.cfg.spiral_rings and level is not None)
-        return Built(lines, linked, self._waypoints(linked, scale), scale=scale)
+        thin = None
+        if level is None and trim_distance is not None and narrow_on:
+            # stripe joins lie half or more over the stripes they join: printed narrow
+            linked, thin = narrow_joins(linked, self.vertices, self.faces)
+        return Built(lines, linked, self._waypoints(linked, scale, thin), scale=scale)
 
-    def _waypoints(self, linked: LinkedPath, scale: NDArray[np.float64] | None = None
-                   ) -> Waypoints:
+    def _waypoints(self, linked: LinkedPath, scale: NDArray[np.float64] | None = None,
+                   narrow: NDArray[np.bool_] | None = None) -> Waypoints:
+        """Process values at the linked points; ``narrow`` (N,) bool: points of joins
+        printed at JOIN_SCALE x their width (``stripe_joins``: the speed sets it)."""
         n = len(linked.points)
         h, v, w = np.zeros(n), np.zeros(n), np.zeros(n)
         normal = linked.normal.copy()
         on = linked.face >= 0
         h[on], v[on], w[on] = self.values_at(linked.face[on], linked.bary[on], scale)
+        if narrow is not None and narrow.any():
+            thin = narrow & on
+            fast = self.flowed_speed(v[thin], JOIN_SCALE, self.profile.speed_at(h[thin]))
+            w[thin] *= v[thin] / fast
+            v[thin] = fast
         normal[on] = point_normals(self.vertex_normals, self.faces, self.normals,
                                    linked.face[on], linked.bary[on])
         if np.any(~on) and np.any(on):

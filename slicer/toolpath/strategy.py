@@ -34,6 +34,7 @@ from slicer.toolpath.line_source import LineSource
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.linking import Lifter
 from slicer.toolpath.results import ComponentResult, Waypoints
+from slicer.toolpath.stripe_joins import coverage_miss
 from slicer.toolpath.surface import boundary_edges
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 from slicer.toolpath.tip_line import tip_line
@@ -107,7 +108,7 @@ def _component_toolpath_unsafe(
     required = required_volume(comp.vertices, comp.faces, comp.height_sliced)
 
     def run(surface: LineSource, used: int, tau: float | None = None, poisson: bool = False,
-            join: float | None = None) -> VolumeMatch[Built]:
+            join: float | None = None, narrow: bool | None = None) -> VolumeMatch[Built]:
         """Lines of pattern ``used`` on ``surface``, volume-matched; with a fixed ``tau``
         only the lines (no linking: for the baseline width measurements)."""
         level_of = surface.contour_level() if used == Pattern.CONTOUR else None
@@ -118,7 +119,7 @@ def _component_toolpath_unsafe(
             lines = surface.lines(used, spacing, poisson)
             scale = surface.width_scale(used, spacing) if cfg.pitch_width else None
             built = comp.build(lines, level_of, spacing, start, lifter, lift, trim_of,
-                               link=tau is None, join=join, scale=scale)
+                               link=tau is None, join=join, scale=scale, narrow=narrow)
             return float(built.waypoints.deposited().sum()), built
 
         if tau is not None:
@@ -184,6 +185,7 @@ def _component_toolpath_unsafe(
         """``run``; where the match fails with the configured joins, also with short ones,
         keeping the better match."""
         match = run(surface, used)
+        join: float | None = None
         if abs(match.rel_error) > SHORT_JOIN_ABOVE and cfg.join_factor > SHORT_JOIN:
             # Longer extruding joins make V(tau) jumpy (a join that flips adds or removes
             # a whole connector); where the match fails with them, e.g. on narrow bands
@@ -191,7 +193,17 @@ def _component_toolpath_unsafe(
             # short joins only and keep whichever matches the volume better.
             short = run(surface, used, join=SHORT_JOIN)
             if abs(short.rel_error) < abs(match.rel_error):
-                match = short
+                match, join = short, SHORT_JOIN
+        if used == Pattern.STRIPE and cfg.narrow_joins and match.tau < 1.0:
+            # Narrow joins leave their ink to the lines (``stripe_joins``); where the lines
+            # then lie closer than their width (tau < 1: spots of the layer no stripe
+            # reaches, e.g. between holes and the edge), joins at full width may place that
+            # ink better: whichever leaves the smaller of the worse of gap and overlap
+            full = run(surface, used, join=join, narrow=False)
+            if (abs(full.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
+                    and coverage_miss(comp.vertices, comp.faces, full.result.waypoints)
+                    < coverage_miss(comp.vertices, comp.faces, match.result.waypoints)):
+                match = full
         return match
 
     used = pattern

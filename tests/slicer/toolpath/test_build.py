@@ -15,6 +15,7 @@ from slicer.extrusion import load_profile
 from slicer.toolpath.build import compute_toolpath
 from slicer.toolpath.layer_build import layer_pattern
 from slicer.toolpath.results import ToolpathResult
+from slicer.toolpath.stripe_joins import RIM_INSET
 from tests.slicer.toolpath.pattern_meshes import (
     eccentric_annulus,
     flat_mesh,
@@ -303,18 +304,21 @@ def test_heights_above_profile_keep_their_slab_spacing() -> None:
     assert res.report["height_out_of_profile_fraction"] == pytest.approx(1.0)
 
 
-def test_stripes_stop_half_a_width_inside() -> None:
-    config = JobConfig().with_overrides(toolpath={"stripe_perimeter": False})
+@pytest.mark.parametrize("narrow", [False, True])
+def test_stripes_stop_inside_the_boundary(narrow: bool) -> None:
+    config = JobConfig().with_overrides(toolpath={"stripe_perimeter": False,
+                                                  "narrow_joins": narrow})
     tp = compute_toolpath(disc_stack(2), config, PROFILE, measure_baselines=False,
                           workers=1).toolpath
     sel = tp.extrude & (tp.pattern == Pattern.STRIPE)
     gap = 12.0 - np.linalg.norm(tp.position[sel, :2], axis=1)
-    # the outermost material band (W / 2 each side of the line) ends at the boundary; a
-    # short stripe is cut back by at most a quarter of its length per end
+    # the U-turn's band (W / 2 each side of its line; with narrow joins W / 4) ends at the
+    # boundary; a short stripe is cut back by at most a quarter of its length per end
+    inset = RIM_INSET if narrow else 0.5
     ratio = gap / tp.width[sel]
-    assert np.percentile(ratio, 2) >= 0.35
+    assert np.percentile(ratio, 2) >= 0.7 * inset
     assert ratio.min() > 0.05
-    assert ratio.min() < 0.6
+    assert ratio.min() < inset + 0.1
 
 
 def test_stripe_layer_has_a_perimeter_loop(discs_perimeter: ToolpathResult) -> None:
@@ -514,7 +518,10 @@ def test_stripe_layer_walls_get_their_centre_line(monkeypatch: pytest.MonkeyPatc
 
     v, f = rings_with_bridge()
     layers = flat_layer(v, f, 0.6)
-    config = JobConfig().with_overrides(toolpath={"first_pattern": "stripe"})
+    # (full-width joins: narrow ones lay less ink on the stubs, and the stripes everywhere
+    # then keep their spacing about as well)
+    config = JobConfig().with_overrides(toolpath={"first_pattern": "stripe",
+                                                  "narrow_joins": False})
     res = compute_toolpath(layers, config, PROFILE, measure_baselines=False, workers=1)
     monkeypatch.setattr(strategy, "WALL_SHARE", 2.0)  # never: stripes everywhere
     everywhere = compute_toolpath(layers, config, PROFILE, measure_baselines=False, workers=1)
@@ -641,9 +648,10 @@ def test_first_layer_beta_applies_to_layer_zero_only() -> None:
     import dataclasses
 
     beta0 = float(np.pi / 4)
-    # (pitch_width off: layer 1's stripes keep W(H), not their spacing)
+    # (pitch_width and narrow_joins off: layer 1's stripes and joins keep W(H))
     config = JobConfig().with_overrides(toolpath={"first_layer_beta": beta0,
-                                                  "pitch_width": False})
+                                                  "pitch_width": False,
+                                                  "narrow_joins": False})
     res = compute_toolpath(disc_stack(2), config, PROFILE, measure_baselines=False, workers=1)
     tp = res.toolpath
     first = dataclasses.replace(PROFILE, beta=beta0)

@@ -39,14 +39,13 @@ def _stripe_disc(field: str, lifted: bool) -> tuple[float, float, float]:
 def test_parallel_stripes_cover_a_disc(lifted: bool) -> None:
     """Stripes across the contours of a disc run radially: their count must fall towards
     the centre, so they lie wider than W at the rim and converge inside. Printed as wide as
-    their spacing and without joins across other stripes, they cover the disc twice on
-    under 5 % (the gap stays at 8-9 %: the ends at branch points and the rim's U-turns).
-    Parallel stripes keep their spacing: half as much in all, the issue's stripe-layer
-    limits (5 % each), with the same ink."""
+    their spacing, without joins across other stripes and with their joins at half width,
+    they meet the issue's stripe-layer limits (5 % each; 4.2/3.5 % flat, 4.0/2.9 % lifted).
+    Parallel stripes keep their spacing: less in all, with the same ink."""
     gap_a, overlap_a, _ = _stripe_disc("across", lifted)
     gap_p, overlap_p, volume = _stripe_disc("parallel", lifted)
-    assert overlap_a <= 0.05
-    assert gap_p + overlap_p < 0.5 * (gap_a + overlap_a)
+    assert gap_a <= 0.05 and overlap_a <= 0.05
+    assert gap_p + overlap_p < gap_a + overlap_a
     assert overlap_p <= 0.02
     assert gap_p <= 0.05
     assert abs(volume) < 0.015
