@@ -25,6 +25,12 @@ EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 EDGE_MM = 6.0
 OPTIMIZE_ITERATIONS = 1
 
+#: the regions the examples' critical selectors find (the socket's rim: two patches of ~3.7k
+#: mm^2; the aorta: 18-330 mm^2), and the share of the selected area further regions may hold
+#: (slivers at a cone's edge, ``assert_the_selected_regions``)
+EXPECTED_REGIONS = {"socket": 2, "aorta": 5}
+SLIVER_AREA = 0.05
+
 pytestmark = pytest.mark.slow
 
 
@@ -49,6 +55,21 @@ def sliced(request: pytest.FixtureRequest) -> tuple[str, FieldResult, list[dict[
     return name, res, list(out.critical_report)
 
 
+def assert_the_selected_regions(name: str, res: FieldResult) -> None:
+    """The job's selectors find at least the example's patches, and any further region is a
+    sliver of the tet mesh's surface at the selector's cone edge (a few faces).
+
+    fTetWild's surface differs from run to run, and faces whose normals sit at the cone's edge
+    form patches of their own (patches of 1-2 faces, dropped below ``MIN_REGION_FACES``, in 4
+    of 9 meshes of these examples; one of 3 faces would be kept as a region): the count of
+    regions is not a property of the example, what they cover is.
+    """
+    areas = sorted((r.area for r in res.regions.regions), reverse=True)
+    expected = EXPECTED_REGIONS[name.removesuffix("-refined")]
+    assert len(areas) >= expected, (name, areas, res.regions.notes)
+    assert sum(areas[expected:]) <= SLIVER_AREA * sum(areas), (name, areas)
+
+
 def test_layer_height_is_controlled(
         sliced: tuple[str, FieldResult, list[dict[str, object]]]) -> None:
     name, res, _ = sliced
@@ -57,8 +78,7 @@ def test_layer_height_is_controlled(
     # refined: O_align still changing by over 1 % per iteration at a 0.005 mm height std).
     allowed = ("converged", "max_iterations") if name.endswith("-refined") else ("converged",)
     assert res.status in allowed, (name, res.status, res.notes)
-    expected_regions = {"socket": 2, "aorta": 5, "socket-refined": 2}[name]
-    assert len(res.regions.regions) == expected_regions
+    assert_the_selected_regions(name, res)
     assert res.height.std <= 0.30 * res.height_initial.std, (name, res.report())
     assert res.height.cv <= 0.20, (name, res.report())
     # The iteration improves on its own start (the harmonic vector field) too.
