@@ -38,7 +38,6 @@ to one process.
 
 from __future__ import annotations
 
-import ctypes
 import math
 import mmap
 import os
@@ -49,21 +48,8 @@ from pathlib import Path
 from core.tolerance import tol
 
 
-class _Slot(ctypes.Structure):
-    """One published value: ``paused`` (wall s), ``hold`` (simulated s), ``until`` (wall s
-    the hold lapses at; a zeroed slot holds nothing)."""
-
-    _fields_ = [("paused", ctypes.c_double), ("hold", ctypes.c_double),
-                ("until", ctypes.c_double)]
-
-
-class _Shared(ctypes.Structure):
-    """The file's layout: the sequence, then the two slots."""
-
-    _fields_ = [("seq", ctypes.c_uint64), ("slot", _Slot * 2)]
-
-
-_SIZE = ctypes.sizeof(_Shared)
+_SIZE = 8 + 2 * 3 * 8  # the sequence (uint64), then two slots of (paused, hold, until)
+_SLOT = 3  # float64 values per slot: paused (wall s), hold (simulated s), until (wall s)
 READ_TRIES = 1000  # a reader retries only when a value was published during its read
 
 
@@ -89,7 +75,8 @@ class SimClock:
         self._published = (0.0, 0.0, 0.0)  # (paused, hold, until) of a private clock
         self._write_lock = threading.Lock()
         self._map: mmap.mmap | None = None
-        self._shared: _Shared | None = None
+        self._seq: memoryview | None = None  # the sequence, uint64
+        self._val: memoryview | None = None  # the two slots, float64
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
@@ -100,7 +87,8 @@ class SimClock:
                 self._map = mmap.mmap(fd, _SIZE)
             finally:
                 os.close(fd)
-            self._shared = _Shared.from_buffer(self._map)
+            self._seq = memoryview(self._map)[:8].cast("Q")
+            self._val = memoryview(self._map)[8:].cast("d")
             self._paused = self.paused()
 
     @staticmethod
@@ -110,17 +98,17 @@ class SimClock:
 
     def _read(self) -> tuple[float, float, float]:
         """(paused, hold, until): a whole published value (see above)."""
-        shared = self._shared
-        if shared is None:
+        seq, val = self._seq, self._val
+        if seq is None or val is None:
             return self._published
         for _ in range(READ_TRIES):
-            seq = shared.seq
-            slot = shared.slot[seq & 1]
-            value = (float(slot.paused), float(slot.hold), float(slot.until))
-            if shared.seq == seq:
+            n = seq[0]
+            i = _SLOT * (n & 1)
+            value = (val[i], val[i + 1], val[i + 2])
+            if seq[0] == n:
                 return value
-        slot = shared.slot[shared.seq & 1]  # the writer publishing non-stop: its latest
-        return float(slot.paused), float(slot.hold), float(slot.until)
+        i = _SLOT * (seq[0] & 1)  # the writer publishing non-stop: its latest
+        return val[i], val[i + 1], val[i + 2]
 
     def paused(self) -> float:
         """Wall seconds during which simulated time stood still (a whole value, see above)."""
@@ -168,17 +156,20 @@ class SimClock:
     def _publish(self) -> None:
         """Make ``paused`` and the earliest hold the readers' value (under the write lock)."""
         hold, until = min(self._holds.values(), default=(0.0, 0.0))
-        shared = self._shared
-        if shared is None:
+        seq, val = self._seq, self._val
+        if seq is None or val is None:
             self._published = (self._paused, hold, until)
             return
-        seq = shared.seq
-        slot = shared.slot[(seq + 1) & 1]  # the slot readers are not pointed at
-        slot.paused, slot.hold, slot.until = self._paused, hold, until
-        shared.seq = seq + 1  # publish: one aligned 8-byte store
+        n = seq[0]
+        i = _SLOT * ((n + 1) & 1)  # the slot readers are not pointed at
+        val[i], val[i + 1], val[i + 2] = self._paused, hold, until
+        seq[0] = n + 1  # publish: one aligned 8-byte store
 
     def close(self) -> None:
-        self._shared = None  # the structure holds the buffer: release it before the map
+        for view in (self._seq, self._val):  # the views hold the buffer: release them first
+            if view is not None:
+                view.release()
+        self._seq = self._val = None
         if self._map is not None:
             self._map.close()
             self._map = None
