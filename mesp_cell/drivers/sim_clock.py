@@ -41,15 +41,16 @@ from __future__ import annotations
 import math
 import mmap
 import os
+import struct
 import threading
 import time
 from pathlib import Path
 
 from core.tolerance import tol
 
-
 _SIZE = 8 + 2 * 3 * 8  # the sequence (uint64), then two slots of (paused, hold, until)
 _SLOT = 3  # float64 values per slot: paused (wall s), hold (simulated s), until (wall s)
+_PACK = struct.Struct("=3d")  # one slot, as the float64 view reads it
 READ_TRIES = 1000  # a reader retries only when a value was published during its read
 
 
@@ -75,8 +76,8 @@ class SimClock:
         self._published = (0.0, 0.0, 0.0)  # (paused, hold, until) of a private clock
         self._write_lock = threading.Lock()
         self._map: mmap.mmap | None = None
-        self._seq: memoryview | None = None  # the sequence, uint64
-        self._val: memoryview | None = None  # the two slots, float64
+        self._seq: memoryview[int] | None = None  # the sequence, uint64
+        self._val: memoryview[float] | None = None  # the two slots, float64 (reads)
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
@@ -156,13 +157,13 @@ class SimClock:
     def _publish(self) -> None:
         """Make ``paused`` and the earliest hold the readers' value (under the write lock)."""
         hold, until = min(self._holds.values(), default=(0.0, 0.0))
-        seq, val = self._seq, self._val
-        if seq is None or val is None:
+        seq, mapped = self._seq, self._map
+        if seq is None or mapped is None:
             self._published = (self._paused, hold, until)
             return
         n = seq[0]
-        i = _SLOT * ((n + 1) & 1)  # the slot readers are not pointed at
-        val[i], val[i + 1], val[i + 2] = self._paused, hold, until
+        at = 8 + 8 * _SLOT * ((n + 1) & 1)  # the slot readers are not pointed at
+        mapped[at : at + 8 * _SLOT] = _PACK.pack(self._paused, hold, until)
         seq[0] = n + 1  # publish: one aligned 8-byte store
 
     def close(self) -> None:
