@@ -15,7 +15,7 @@ Why a hold as well as the pause: a twin learns it lagged only once it runs again
 alone comes after its readers counted the lag. The emulated extruder flowed on through a stalled
 twin with the state it had (a screw off between layers stayed off), then stood still while the
 twin caught up and switched it (the screw came on late): the ink of the stall moved from one
-side of the switch to the other, up to -11 % of a short print under a loaded host. So during a
+side of the switch to the other (docs/robustness.md). So during a
 motion the twin holds the clock at the simulated time it has reached, every period, and each
 extruder switch holds it at the time it was decided until the extruder took it: a reader never
 sees a time the twin or a switch has not reached. A hold lapses ``hold_s`` wall seconds after

@@ -18,8 +18,8 @@ At time scale 1 that excess is zero and nothing is recorded.
 On the twin the latency need not move any ink: the switcher holds the shared clock
 (``SimClock.hold``) at the time the switch was decided until the extruder node acknowledged
 it, so the emulated extruder takes it at that simulated time whatever the wall-clock latency
-(a loaded host delayed a switch-on by over 100 ms, 9 % of a short print's ink at time scale 1,
-where nothing is recorded); its measured latency is then ~0 and so is its excess.
+(on a loaded host, at time scale 1 too, where nothing is recorded); its latency measured on
+that clock is then 0 and so is its excess (docs/robustness.md).
 """
 
 from __future__ import annotations
