@@ -81,8 +81,9 @@ class ExtruderPlant:
     def step(self, now: float) -> None:
         """Advance the flow and the totaliser to ``now`` (exact for a piecewise constant input)."""
         with self._lock:
-            # Simulated seconds since the last step. The twin may pause the clock after this
-            # process read it, so simulated time can seem to step back: hold until it passes.
+            # Simulated seconds since the last step. The twin holds the clock where it is, but
+            # may pause it a few us after this process read it (or after its hold lapsed), so
+            # simulated time can seem to step back: hold until it passes.
             sim_now = self.clock.now(now)
             dt = max(0.0, sim_now - self._sim_t)
             self._sim_t = max(self._sim_t, sim_now)

@@ -20,6 +20,7 @@ from mesp_cell.drivers.robot_base import UR5E_QD_LIMIT, ServoConfig, ur5e_flange
 from mesp_cell.drivers.sim_clock import SimClock, clock_for
 
 HOME_Q = np.deg2rad([0.0, -90.0, 90.0, -90.0, -90.0, 0.0])
+HOLD_KEY = "twin"  # the twin's hold on the shared clock (``SimClock.hold``)
 
 
 def precise_sleep_until(deadline: float) -> None:
@@ -102,16 +103,21 @@ class KinematicTwin:
         The period ends when the simulated clock reaches the twin's time. A twin behind the
         clock (its loop cannot keep ``time_scale``) does not race to catch up: it pauses the
         clock instead, so the extruder emulator's flow, counted on the same clock, waits for
-        the arm. Simulated time thus stays the twin's own ``periods x dt`` during a motion.
+        the arm. And the clock is held at the twin's time until the next period (for
+        ``servo.overrun_s`` at most, when the servo watchdog stops a stream anyway), so a
+        twin stalled mid-period stops the extruder's simulated time at once, not only after
+        it runs again (``sim_clock``). Simulated time thus stays the twin's own
+        ``periods x dt`` during a motion.
         """
         clock = self.clock
         sim = clock.now(t_start) if self._sim is None else self._sim  # a motion starts now
         self._sim = sim + self.servo.dt
         due = clock.wall_at(self._sim)
         now = clock.wall()
+        clock.hold(HOLD_KEY, self._sim, self.servo.overrun_s, pause_s=now - due)
         if now > due:
-            clock.pause(now - due)
-        elif self.servo.dt / self.servo.time_scale >= self.BATCH_S:
+            return
+        if self.servo.dt / self.servo.time_scale >= self.BATCH_S:
             precise_sleep_until(due)  # real time (or nearly): a precise period, low jitter
         elif due - now > self.BATCH_S:
             time.sleep(due - now)
@@ -119,6 +125,7 @@ class KinematicTwin:
     def end_motion(self) -> None:
         """The arm rests: simulated time runs with the clock until the next motion."""
         self._sim = None
+        self.clock.release(HOLD_KEY)
 
     # -- motion ----------------------------------------------------------------------------
     def _step(self, target: np.ndarray, dt: float) -> None:

@@ -14,6 +14,12 @@ ink it moved beyond what the same switch would have moved in real time,
 ``-(new - old rate) x latency x (1 - 1 / time_scale)`` (nominal mm^3), is appended to the
 job's ledger (``print_ledger.SWITCH``), where the print check takes it off the part's ink.
 At time scale 1 that excess is zero and nothing is recorded.
+
+On the twin the latency need not move any ink: the switcher holds the shared clock
+(``SimClock.hold``) at the time the switch was decided until the extruder node acknowledged
+it, so the emulated extruder takes it at that simulated time whatever the wall-clock latency
+(on a loaded host, at time scale 1 too, where nothing is recorded); its latency measured on
+that clock is then 0 and so is its excess (docs/robustness.md).
 """
 
 from __future__ import annotations
@@ -22,13 +28,18 @@ import logging
 import queue
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
 from pathlib import Path
 from typing import NamedTuple
 
+from mesp_cell.drivers.sim_clock import SimClock
 from mesp_cell.nodes.print_ledger import Ledger
 
 log = logging.getLogger("mesp.robot")
+
+HOLD_KEY = "switch"  # the switches' hold on the twin's shared clock
+HOLD_S = 1.0  # s of wall time a switch holds the clock at most (the bus request's timeout)
 
 
 class Switch(NamedTuple):
@@ -56,13 +67,18 @@ class Switcher:
         clock: s, the clock the extruder's flow runs on (the twin's ``SimClock.now``; the
             wall clock on the real cell).
         time_scale: the twin's speed-up (1 on the real cell).
+        sim_clock: the twin's shared clock, held at each switch's time until the extruder
+            took it (None on the real cell).
     """
 
     def __init__(self, send: Callable[[str, float], str], clock: Callable[[], float],
-                 time_scale: float) -> None:
+                 time_scale: float, sim_clock: SimClock | None = None) -> None:
         self.send, self._clock, self.time_scale = send, clock, float(time_scale)
+        self.sim_clock = sim_clock
         self._queue: queue.Queue[Switch] = queue.Queue()
         self._latest = float("-inf")
+        self._pending: deque[float] = deque()  # due of each switch queued and not yet sent
+        self._pending_lock = threading.Lock()
 
     def clock(self) -> float:
         """The flow's clock, never back: a twin that lags pulls the shared clock back to its
@@ -72,8 +88,27 @@ class Switcher:
 
     def put(self, verb: str, rate: float, step: float = 0.0,
             job_dir: Path | None = None) -> None:
-        """Queue a switch decided now (thread-safe; returns at once)."""
-        self._queue.put(Switch(verb, rate, step, self.clock(), job_dir))
+        """Queue a switch decided now (thread-safe; returns at once); on the twin, hold the
+        clock at now until it is sent."""
+        with self._pending_lock:
+            sw = Switch(verb, rate, step, self.clock(), job_dir)
+            if self.sim_clock is not None:
+                self._pending.append(sw.due)
+                if len(self._pending) == 1:
+                    self.sim_clock.hold(HOLD_KEY, sw.due, HOLD_S)
+            self._queue.put(sw)
+
+    def _sent(self) -> None:
+        """The oldest queued switch was sent (or refused): hold at the next one, if any."""
+        if self.sim_clock is None:
+            return
+        with self._pending_lock:
+            if self._pending:
+                self._pending.popleft()
+            if self._pending:
+                self.sim_clock.hold(HOLD_KEY, self._pending[0], HOLD_S)
+            else:
+                self.sim_clock.release(HOLD_KEY)
 
     def run(self, stopping: threading.Event) -> None:
         """Send queued switches until ``stopping`` is set (the node's thread)."""
@@ -82,11 +117,14 @@ class Switcher:
                 sw = self._queue.get(timeout=0.2)
             except queue.Empty:
                 continue
-            why = self.send(sw.verb, sw.rate)
-            if why:
-                log.warning("extruder %s refused: %s", sw.verb, why)
-                continue
-            self._record(sw, self.clock() - sw.due)
+            try:
+                why = self.send(sw.verb, sw.rate)
+                if why:
+                    log.warning("extruder %s refused: %s", sw.verb, why)
+                    continue
+                self._record(sw, self.clock() - sw.due)
+            finally:
+                self._sent()
 
     def excess_mm3(self, step: float, latency: float) -> float:
         """Nominal mm^3 a switch of ``step`` mm^3/s, ``latency`` s late on the flow's clock,

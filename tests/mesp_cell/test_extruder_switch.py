@@ -57,3 +57,45 @@ def test_real_time_records_nothing(tmp_path: Path) -> None:
     print_ledger.Ledger(tmp_path, fresh=True).close()
     run_switches(1.0, tmp_path)
     assert print_ledger.read(tmp_path).switches == 0
+
+
+@pytest.mark.parametrize("verb", ["start", "stop"])
+def test_on_the_twin_a_late_switch_lands_at_its_simulated_time(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, verb: str) -> None:
+    # Real time (scale 1): the switch decided at 0.5 s of flow reaches the emulated extruder
+    # 120 ms later (a loaded host: the switcher's thread, the bus, the extruder node), while
+    # the extruder polls on every 5 ms. Holding the shared clock at the decision, the
+    # extruder takes it at 0.5 s: 0.5 s of flow (of the 1 s it could run), not 0.62 (0.38).
+    from mesp_cell.drivers import registers as R
+    from mesp_cell.drivers.extruder_plant import ExtruderPlant, PlantParams
+    from mesp_cell.drivers.sim_clock import SimClock
+
+    wall = Clock()
+    wall.t = 1000.0
+    monkeypatch.setattr(SimClock, "wall", staticmethod(wall))
+    path = tmp_path / "sim.clock"
+    rate = 5.0
+    plant = ExtruderPlant(PlantParams(tau_s=1e-4, watchdog_s=0.0), wall(),
+                          SimClock(1.0, path, reset=True))
+    plant.set_rate(rate, wall())
+    plant.command(R.CMD_RUN if verb == "stop" else 0, wall())
+    twin_clock = SimClock(1.0, path)
+    stopping = threading.Event()
+
+    def send(verb: str, rate: float) -> str:
+        for _ in range(24):
+            wall.t += 0.005
+            plant.step(wall())
+        plant.command(R.CMD_RUN if verb == "start" else 0, wall())
+        stopping.set()
+        return ""
+
+    sw = Switcher(send, twin_clock.now, 1.0, twin_clock)
+    wall.t += 0.5
+    plant.step(wall())
+    sw.put(verb, rate, rate if verb == "start" else -rate, tmp_path)
+    sw.run(stopping)
+    wall.t = 1001.0
+    plant.step(wall())
+    assert plant.volume == pytest.approx(rate * 0.5, rel=1e-3)
+    assert twin_clock.now() == pytest.approx(1001.0)  # released: the clock runs on

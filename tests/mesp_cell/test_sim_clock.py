@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from mesp_cell.drivers import registers as R
+from mesp_cell.drivers import robot_twin
 from mesp_cell.drivers.extruder_plant import ExtruderPlant, PlantParams
 from mesp_cell.drivers.robot_base import ServoConfig
 from mesp_cell.drivers.robot_twin import KinematicTwin
@@ -124,3 +125,75 @@ def test_a_writer_stopped_mid_write_leaves_the_published_value_whole(tmp_path: P
     assert reader.paused() == 2.0
     writer.pause(float("nan"))  # ignored: the clock never breaks
     assert reader.paused() == 2.0
+
+
+def test_a_hold_stops_every_reader_until_released_or_lapsed(tmp_path: Path) -> None:
+    path = tmp_path / "sim.clock"
+    writer, reader = SimClock(2.0, path, reset=True), SimClock(2.0, path)
+    wall = writer.wall()
+    writer.hold("twin", 2.0 * wall + 1.0, 10.0)
+    writer.hold("switch", 2.0 * wall + 0.5, 10.0)  # the earliest hold is in force
+    assert reader.now(wall + 5.0) == pytest.approx(2.0 * wall + 0.5)
+    assert reader.now(wall + 0.1) == pytest.approx(2.0 * (wall + 0.1))  # below it: free
+    writer.release("switch")
+    assert reader.now(wall + 5.0) == pytest.approx(2.0 * wall + 1.0)
+    assert reader.now(wall + 11.0) == pytest.approx(2.0 * (wall + 11.0))  # lapsed
+    writer.hold("twin", 2.0 * wall + 1.0, 10.0, pause_s=0.25)  # one publication
+    assert reader.paused() == pytest.approx(0.25)
+    writer.release("twin")
+    assert reader.now(wall + 5.0) == pytest.approx(2.0 * (wall + 4.75))
+    # a restarted twin's clock holds nothing of its predecessor's once it writes
+    writer.hold("twin", 0.0, 10.0)
+    SimClock(2.0, path).pause(0.25)
+    assert reader.now(wall + 5.0) == pytest.approx(2.0 * (wall + 4.5))
+
+
+class FakeWall:
+    """A wall clock the test moves: the twin's sleeps and the emulator's polls advance it."""
+
+    def __init__(self) -> None:
+        self.t = 1000.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+@pytest.mark.parametrize("switch", ["on", "off"])
+def test_a_twin_stalled_mid_period_moves_no_ink_across_a_switch(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, switch: str) -> None:
+    # Real time (scale 1) on a loaded host: the twin's servo thread is descheduled for 130 ms,
+    # 20 ms before it switches the screw on (or off), while the emulated extruder polls on
+    # every 5 ms. The extruder must deliver the rate over the twin's own on-time: the old
+    # clock, paused only once the twin ran again, let the extruder count the stall with the
+    # screw off (on) and then wait while the twin caught up with it on (off): 110 ms of the
+    # 0.5 s of flow lost (gained), as the synthetic print's -9 % under a loaded suite.
+    wall = FakeWall()
+    monkeypatch.setattr(SimClock, "wall", staticmethod(wall))
+    monkeypatch.setattr(robot_twin, "precise_sleep_until",
+                        lambda due: setattr(wall, "t", max(wall.t, due)))
+    path = tmp_path / "sim.clock"
+    rate, dt, stall_s, poll_s = 5.0, 0.002, 0.13, 0.005
+    plant = ExtruderPlant(PlantParams(tau_s=1e-4, watchdog_s=0.0), wall(),
+                          SimClock(1.0, path, reset=True))
+    plant.set_rate(rate, wall())
+    twin = KinematicTwin(ServoConfig(dt=dt, overrun_s=0.3), q0=synthetic.HOME,
+                         clock=SimClock(1.0, path))
+    twin.connect()
+    on_k, off_k = 100, 350  # 0.5 s of flow
+    stall_k = (on_k if switch == "on" else off_k) - 10
+    for k in range(450):
+        t0 = twin.init_period()
+        twin.servo_j(synthetic.HOME)
+        if k == stall_k:  # descheduled: the emulator polls on without the twin
+            for _ in range(round(stall_s / poll_s)):
+                wall.t += poll_s
+                plant.step(wall())
+        if k in (on_k, off_k):
+            plant.command(R.CMD_RUN if k == on_k else 0, wall())
+        twin.wait_period(t0)
+        plant.step(wall())
+    twin.servo_stop()
+    wall.t += 1.0
+    plant.step(wall())
+    assert twin.clock.paused() == pytest.approx(stall_s - dt)  # the twin lagged (less its period)
+    assert plant.volume == pytest.approx(rate * (off_k - on_k) * dt, rel=1e-3)
