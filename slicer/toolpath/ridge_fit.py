@@ -169,7 +169,7 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
     f = np.asarray(faces, dtype=np.int64)
     d = np.asarray(distance, dtype=np.float64)
     width = np.maximum(np.asarray(band, dtype=np.float64), 2.0 * d)
-    pitch, fit = band_pitch(d, width - d, spacing, smooth)
+    pitch, fit = band_pitch(d, width - d, spacing, smooth, room)
     n_face = np.maximum(np.floor((fit / pitch)[f].mean(axis=1) + 0.5 - room), 1
                         ).astype(np.int64)
     phi = d / pitch
