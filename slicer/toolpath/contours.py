@@ -61,31 +61,18 @@ def band_count(band: NDArray[np.float64], spacing: float) -> NDArray[np.int64]:
 
 
 def band_pitch(d_outer: NDArray[np.float64], d_inner: NDArray[np.float64], spacing: float,
-               smooth: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
-               room: float = BRANCH_ROOM,
+               smooth: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """(n,) float64 mm, the even pitch b / n of a band whose local width is
-    b = d_outer + d_inner, and (n,) float64 mm, n x that pitch (the width the lines fill;
-    n = fit / pitch is the count laid there).
-
-    Without ``smooth``: n = round(b / spacing). With it (see ``two_sided_contour_lines``)
-    the pitch is blended, and a line is laid only where it has room: n = floor(blended
-    band / blended pitch + 1/2 - ``room``). Where that drops a line (a band of 3.6
-    spacings whose ends are narrower: the blend reads 3.8 lines' pitch, 3 are laid), the
-    pitch is blended again from b / n, so the lines laid fill the band: with the first
-    pitch, 3 lines at a 4-line pitch leave 0.9 pitch bare and the widths that follow the
-    pitch (``LineSource.width_scale``) are too narrow for it.
-    """
+    """(n,) float64 mm, the even pitch b / round(b / spacing) of a band whose local width is
+    b = d_outer + d_inner, and (n,) the band width it is compared with; both blended by
+    ``smooth`` when given (see ``two_sided_contour_lines``)."""
     band = np.asarray(d_outer, dtype=np.float64) + np.asarray(d_inner, dtype=np.float64)
     pitch = band / band_count(band, spacing)
-    if smooth is None:
-        return np.maximum(pitch, tol.zero), band
-    # the count compares like with like: both blended, so it is exactly n inside a region
-    # of n lines whatever the small-scale ripple of the distances
-    blended = np.maximum(smooth(pitch), tol.zero)
-    count = np.maximum(np.floor(smooth(band) / blended + 0.5 - room), 1.0)
-    laid = np.maximum(smooth(band / count), tol.zero)
-    return laid, count * laid
+    if smooth is not None:
+        # the count compares like with like: both blended, so it is exactly n inside a
+        # region of n lines whatever the small-scale ripple of the distances
+        return np.maximum(smooth(pitch), tol.zero), smooth(band)
+    return np.maximum(pitch, tol.zero), band
 
 
 def two_sided_contour_lines(
@@ -128,8 +115,7 @@ def two_sided_contour_lines(
     if not spacing > 0:
         raise InputError(f"contour spacing must be positive, got {spacing} mm",
                          "check the toolpath width")
-    pitch, fit = (band_pitch(da, db, spacing, smooth, room) if pitch_fit is None
-                  else pitch_fit)
+    pitch, fit = band_pitch(da, db, spacing, smooth) if pitch_fit is None else pitch_fit
     # lines per face from the blended pitch, so a line appears where its room does
     n_face = np.maximum(np.floor((fit / pitch)[f].mean(axis=1) + 0.5 - room), 1
                         ).astype(np.int64)
