@@ -156,13 +156,15 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
                        spacing: float,
                        smooth: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
                        room: float = BRANCH_ROOM, ridge: SurfaceLines | None = None,
-                       ) -> tuple[SurfaceLines, NDArray[np.float64]]:
+                       laid: bool = True) -> tuple[SurfaceLines, NDArray[np.float64]]:
     """Contours with a whole number of lines across the local width ``band``.
 
     distance: (n,) float64 mm boundary distance; band: (n,) float64 mm, ``band_across``.
     spacing: mm, target pitch (tau W); smooth, room: as ``contours.two_sided_contour_lines``
     (the pitch blended where the count changes, a line starts where it has nearly a full
     pitch of room). ridge: ``medial.medial_lines`` of the surface when the caller has it.
+    laid: where a line is dropped for room, the pitch of the lines laid (``_laid_pitch``);
+    False: the blended pitch everywhere (the strategy tries both, see ``strategy.py``).
     Returns the lines and (n,) float64 mm, the local pitch they are laid at.
     """
     check_mesh(vertices, faces)
@@ -172,7 +174,7 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
     pitch, fit = band_pitch(d, width - d, spacing, smooth)
     if ridge is None:
         ridge = medial_lines(np.asarray(vertices, dtype=np.float64), f.astype(np.int32))
-    if smooth is not None:
+    if laid and smooth is not None:
         pitch, fit = _laid_pitch(np.asarray(vertices, dtype=np.float64), f, width, pitch, fit,
                                  room, ridge, smooth)
     n_face = np.maximum(np.floor((fit / pitch)[f].mean(axis=1) + 0.5 - room), 1
