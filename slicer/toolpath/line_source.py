@@ -51,6 +51,8 @@ class LineSource:
             narrow walls get their centre line (``narrow_walls``); 0: stripes everywhere.
         fit_ridge: contours that are not fitted to a band get a whole number of lines
             across the component's local width (``ridge_fit.py``) instead of eq. 9's.
+        laid_pitch: those lines at the pitch of the count laid where one is dropped for
+            room (``ridge_fit._laid_pitch``); False: at the blended pitch everywhere.
     """
 
     geometry: SurfaceGeometry
@@ -59,6 +61,7 @@ class LineSource:
     fill_holes: bool = False
     wall_half_width: float = 0.0
     fit_ridge: bool = False
+    laid_pitch: bool = True
 
     @staticmethod
     def of(vertices: NDArray[np.float64], faces: NDArray[np.int32], fit_bands: bool = True,
@@ -120,7 +123,7 @@ class LineSource:
         if self.fill_holes or self.band_fit_covers(spacing):
             return self
         return LineSource(self.geometry, self.fit_bands, self.perimeter, True,
-                          self.wall_half_width, self.fit_ridge)
+                          self.wall_half_width, self.fit_ridge, self.laid_pitch)
 
     def width_scale(self, pattern: int, spacing: float) -> NDArray[np.float64] | None:
         """(n,) float64, the band's local pitch over ``spacing`` (within
@@ -149,7 +152,7 @@ class LineSource:
             wall = self.geometry.reach(self.wall_half_width) > self.wall_half_width
             return np.where(wall, centre, 1.0)
         if self._ridge_fitted(pattern):
-            pitch = self.geometry.ridge_fit(spacing)[1]
+            pitch = self.geometry.ridge_fit(spacing, self.laid_pitch)[1]
             return np.asarray(np.clip(pitch / spacing, *CENTRE_WIDTH_SCALE), dtype=np.float64)
         sides = self.band_sides() if pattern == Pattern.CONTOUR else None
         if sides is None or self.fill_holes:
@@ -162,6 +165,14 @@ class LineSource:
         to a band between two sides, or that fit leaves holes."""
         return (pattern == Pattern.CONTOUR and self.fit_ridge
                 and (self.band_sides() is None or self.fill_holes))
+
+    def laid_pitch_matters(self, spacing: float) -> bool:
+        """Whether the contours fitted to the local width at ``spacing`` change with
+        ``laid_pitch`` (a line is dropped for room somewhere): only then is the other pitch
+        worth a try."""
+        geo = self.geometry
+        return not np.array_equal(geo.ridge_fit(spacing, True)[1],
+                                  geo.ridge_fit(spacing, False)[1])
 
     def centre_lines(self) -> SurfaceLines:
         """One line along the middle of a component about one width wide: between its two
@@ -205,7 +216,7 @@ class LineSource:
         """
         geo = self.geometry
         if self._ridge_fitted(pattern):
-            return geo.ridge_fit(spacing)[0]
+            return geo.ridge_fit(spacing, self.laid_pitch)[0]
         if pattern == Pattern.CONTOUR:
             if self.band_sides() is not None:
                 fitted = geo.fitted_contours(spacing)

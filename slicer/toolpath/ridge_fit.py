@@ -156,13 +156,15 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
                        spacing: float,
                        smooth: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
                        room: float = BRANCH_ROOM, ridge: SurfaceLines | None = None,
-                       ) -> tuple[SurfaceLines, NDArray[np.float64]]:
+                       laid: bool = True) -> tuple[SurfaceLines, NDArray[np.float64]]:
     """Contours with a whole number of lines across the local width ``band``.
 
     distance: (n,) float64 mm boundary distance; band: (n,) float64 mm, ``band_across``.
     spacing: mm, target pitch (tau W); smooth, room: as ``contours.two_sided_contour_lines``
     (the pitch blended where the count changes, a line starts where it has nearly a full
     pitch of room). ridge: ``medial.medial_lines`` of the surface when the caller has it.
+    laid: where a line is dropped for room, the pitch of the lines laid (``_laid_pitch``);
+    False: the blended pitch everywhere (the strategy tries both, see ``strategy.py``).
     Returns the lines and (n,) float64 mm, the local pitch they are laid at.
     """
     check_mesh(vertices, faces)
@@ -170,6 +172,11 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
     d = np.asarray(distance, dtype=np.float64)
     width = np.maximum(np.asarray(band, dtype=np.float64), 2.0 * d)
     pitch, fit = band_pitch(d, width - d, spacing, smooth)
+    if ridge is None:
+        ridge = medial_lines(np.asarray(vertices, dtype=np.float64), f.astype(np.int32))
+    if laid and smooth is not None:
+        pitch, fit = _laid_pitch(np.asarray(vertices, dtype=np.float64), f, width, pitch, fit,
+                                 room, ridge, smooth)
     n_face = np.maximum(np.floor((fit / pitch)[f].mean(axis=1) + 0.5 - room), 1
                         ).astype(np.int64)
     phi = d / pitch
@@ -181,8 +188,6 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
         if part.n_lines:
             parts.append(part)
             maps.append(sel)
-    if ridge is None:
-        ridge = medial_lines(np.asarray(vertices, dtype=np.float64), f.astype(np.int32))
     if ridge.n_lines and np.any(n_face % 2 == 1):
         # an odd count's middle line on the ridge: the medial line where the count at its
         # vertices is odd (phi = n / 2 there: a quarter pitch beyond the last pair's level)
@@ -194,3 +199,39 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
             maps.append(np.arange(len(f)))
     lines = merge_lines(parts, maps) if parts else empty_lines()
     return lines, pitch
+
+
+def _laid_pitch(v: NDArray[np.float64], f: NDArray[np.int64], width: NDArray[np.float64],
+                pitch: NDArray[np.float64], fit: NDArray[np.float64], room: float,
+                ridge: SurfaceLines,
+                smooth: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+                ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """(n,) float64 mm, the pitch of the lines actually laid, and (n,) float64 mm, the
+    width they fill (fit / pitch: the count, as ``band_pitch``'s).
+
+    The blended pitch (``band_pitch``) is that of round(b / spacing) lines, but a line is
+    laid only where it has room (floor(blended b / blended pitch + 1/2 - room)): across an
+    ellipse 3.6 spacings wide whose ends are narrower the blend reads 3.8 lines, 3 are
+    laid at the pitch of 4, 0.9 pitch apart too far and printed too narrow for it
+    (``LineSource.width_scale`` follows the pitch). Where a line is dropped so, the pitch
+    is blended again from b / the count laid (the counts stay). That count is read at
+    each vertex and on the ridge, where a line is added or dropped (its nearest ridge
+    point), the larger of the two: read at the vertex alone it changes across a band
+    whose blend drifts by a tenth of a line from side to side. Elsewhere the pitch stays
+    (rounding also absorbs a band read too wide at a bar's end, which b / n would not).
+    """
+    ratio = fit / pitch
+    count = np.maximum(np.floor(ratio + 0.5 - room), 1.0)
+    used = np.unique(f)
+    if ridge.n_lines and len(used):
+        at = np.einsum("pk,pk->p", ratio[f[ridge.face]], ridge.bary)
+        _, near = cKDTree(ridge.points).query(v[used])
+        count[used] = np.maximum(count[used], np.floor(at + 0.5 - room)[near])
+    dropped = count < np.rint(ratio)
+    if not dropped.any():
+        return pitch, fit
+    laid = np.maximum(smooth(width / count), tol.zero)
+    share = np.clip(smooth(dropped.astype(np.float64)), 0.0, 1.0)
+    share[dropped] = 1.0
+    out = (1.0 - share) * pitch + share * laid
+    return out, np.where(dropped, np.maximum(np.floor(ratio + 0.5 - room), 1.0), ratio) * out

@@ -68,7 +68,7 @@ class SurfaceGeometry:
     _stripes: dict[float, SurfaceLines] = field(default_factory=dict, repr=False)
     _smoother: list[Callable[[NDArray[np.float64]], NDArray[np.float64]]] = field(
         default_factory=list, repr=False)
-    _ridge_fit: dict[float, tuple[SurfaceLines, NDArray[np.float64]]] = field(
+    _ridge_fit: dict[tuple[float, bool], tuple[SurfaceLines, NDArray[np.float64]]] = field(
         default_factory=dict, repr=False)
 
     @cached_property
@@ -185,16 +185,21 @@ class SurfaceGeometry:
         ``medial.medial_lines``)."""
         return medial_lines(self.vertices, self.faces)
 
-    def ridge_fit(self, spacing: float) -> tuple[SurfaceLines, NDArray[np.float64]]:
+    def ridge_fit(self, spacing: float, laid: bool = True
+                  ) -> tuple[SurfaceLines, NDArray[np.float64]]:
         """``ridge_fit.ridge_fitted_lines`` at ``spacing``, the pitch blended over
-        PITCH_SMOOTHING spacings: the lines and (n,) their local pitch."""
-        if spacing not in self._ridge_fit:
+        PITCH_SMOOTHING spacings (``laid``: that of the lines laid where one is dropped for
+        room): the lines and (n,) their local pitch."""
+        key = (spacing, laid)
+        if key not in self._ridge_fit:
             smooth = self.smoother(PITCH_SMOOTHING * spacing) if PITCH_SMOOTHING > 0 else None
             fit = ridge_fitted_lines(self.vertices, self.faces, self.distance,
-                                     self.band_across, spacing, smooth, ridge=self.ridge)
-            self._ridge_fit.clear()
-            self._ridge_fit[spacing] = fit
-        return self._ridge_fit[spacing]
+                                     self.band_across, spacing, smooth, ridge=self.ridge,
+                                     laid=laid)
+            if len(self._ridge_fit) >= 2:
+                self._ridge_fit.clear()
+            self._ridge_fit[key] = fit
+        return self._ridge_fit[key]
 
     def centre_lines(self) -> SurfaceLines:
         """One line along the middle of a band with holes, where the distances from the
