@@ -1,0 +1,160 @@
+"""Repair of closed but non-manifold surfaces (``mesp slice --repair``) by fTetWild's wrap.
+
+A CAD export or a merged scan is often closed yet non-manifold: bodies touching along an
+edge, an internal face left between two parts, shells sharing a seam. ``load_surface``
+refuses it (the winding cannot be made consistent around an edge of 3 or more faces).
+fTetWild is built for such input: it meshes the space around the triangles and keeps the tets
+inside by the generalized winding number, so the boundary of its tet mesh is a closed,
+manifold surface within its envelope (``EPSILON`` of the bounding-box diagonal) of the input.
+The wrap is coarse (``EDGE_LENGTH_FAC``): only its boundary is used, and its accuracy is the
+envelope, not the edge length. The wrapped surface then goes through ``load_surface``'s checks
+like any other, and one note says what changed (edges, faces, volume before and after).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from core.tolerance import tol
+from slicer.solid_volume import signed_volume
+from slicer.tet_geometry import compact, orient_positive
+
+# Target edge length of the wrap, as a fraction of the bounding-box diagonal: coarse, so the
+# check that offers --repair stays fast; the boundary's accuracy is the envelope below.
+EDGE_LENGTH_FAC = 0.2
+# fTetWild's envelope, as a fraction of the bounding-box diagonal (its default).
+EPSILON = 1e-3
+# Mesh-quality work is not needed for a boundary: few optimisation passes, a loose target.
+OPT_ITERATIONS = 5
+STOP_ENERGY = 100.0
+# Copies of a vertex where parts of the wrap touch are moved apart by this fraction of the
+# bounding-box diagonal (far above the merge tolerance, far below the envelope).
+SPLIT_OFFSET_FAC = 1e-5
+
+# The outward faces of a positively oriented tet: face k is opposite vertex k.
+_TET_FACES = np.array([(1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)])
+
+
+@dataclass(frozen=True)
+class Wrap:
+    """What ``wrap`` changed.
+
+    Attributes:
+        non_manifold_edges: edges used by 3 or more faces in the input.
+        faces_before: triangles of the input. faces_after: triangles of the wrap.
+        volume_before: signed volume of the input, in file units cubed (the sum over its
+            faces; counts overlapping shells twice).
+        volume_after: volume of the wrap, in file units cubed.
+        pinches: vertices of the wrap where parts touch (along an edge or at a point),
+            each split into one copy per part.
+    """
+
+    non_manifold_edges: int
+    faces_before: int
+    faces_after: int
+    volume_before: float
+    volume_after: float
+    pinches: int
+
+
+def boundary_faces(tets: np.ndarray) -> np.ndarray:
+    """(f, 3) int64 faces used by exactly one of the positively oriented (T, 4) ``tets``,
+    wound counter-clockwise seen from outside."""
+    faces = tets[:, _TET_FACES].reshape(-1, 3).astype(np.int64)
+    _, inverse, uses = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True,
+                                 return_counts=True)
+    return faces[uses[inverse.ravel()] == 1]
+
+
+def non_manifold_edges(faces: np.ndarray) -> int:
+    """Edges of the (m, 3) ``faces`` used by 3 or more faces."""
+    edges = np.sort(np.asarray(faces)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+    _, uses = np.unique(edges, axis=0, return_counts=True)
+    return int(np.count_nonzero(uses > 2))
+
+
+def split_pinches(vertices: np.ndarray, faces: np.ndarray, offset: float
+                  ) -> tuple[np.ndarray, np.ndarray, int]:
+    """Give each fan of faces around a vertex its own copy of it, so parts of a closed surface
+    that touch along an edge or at a point become separate shells.
+
+    Corners (face, vertex) are joined across edges used by exactly two faces; each connected
+    set of corners is one vertex of the result. A vertex split into k copies has each copy
+    moved ``offset`` (the input's unit) towards the centroid of its own faces, so the copies
+    stay apart when vertices are merged by position again.
+
+    Args:
+        vertices: (n, 3) float64. faces: (m, 3) int, closed.
+
+    Returns:
+        (vertices (n', 3) float64, faces (m, 3) int64, vertices split).
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    faces = np.asarray(faces, dtype=np.int64)
+    m = len(faces)
+    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    corner_a = (np.arange(3 * m) // 3) * 3 + np.tile([0, 1, 2], m)  # corner of the start
+    corner_b = (np.arange(3 * m) // 3) * 3 + np.tile([1, 2, 0], m)  # corner of the end
+    _, edge_id, uses = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True,
+                                 return_counts=True)
+    edge_id = edge_id.ravel()
+    manifold = np.flatnonzero(uses[edge_id] == 2)
+    order = manifold[np.argsort(edge_id[manifold], kind="stable")]
+    first, second = order[0::2], order[1::2]  # the two half-edges of each manifold edge
+    same = directed[first, 0] == directed[second, 0]  # same start vertex: a flipped neighbour
+    # corner of the start of `first` meets the corner of the same vertex in `second`
+    rows = np.concatenate([corner_a[first], corner_b[first]])
+    cols = np.concatenate([np.where(same, corner_a[second], corner_b[second]),
+                           np.where(same, corner_b[second], corner_a[second])])
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
+    _, label = connected_components(graph, directed=False)
+    vertex_of = faces.ravel()
+    _, first_corner, new_id = np.unique(label, return_index=True, return_inverse=True)
+    original = vertex_of[first_corner]  # (n',) the input vertex of each new vertex
+    copies = np.bincount(original, minlength=len(vertices))
+    new_v = np.asarray(vertices, dtype=np.float64)[original].copy()
+    split = np.flatnonzero(copies[original] > 1)
+    if len(split):
+        centres = np.asarray(vertices, dtype=np.float64)[faces].mean(axis=1)  # (m, 3)
+        corner_face = np.arange(3 * m) // 3
+        count = np.bincount(new_id, minlength=len(original))
+        mean = np.column_stack([np.bincount(new_id, weights=centres[corner_face, k],
+                                            minlength=len(original)) for k in range(3)])
+        toward = mean / np.maximum(count, 1)[:, None] - new_v
+        length = np.linalg.norm(toward, axis=1)
+        new_v[split] += offset * toward[split] / np.maximum(length[split], tol.tiny)[:, None]
+    return new_v, new_id.reshape(m, 3).astype(np.int64), int(np.count_nonzero(copies > 1))
+
+
+def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, Wrap]:
+    """The boundary of fTetWild's winding-number tet mesh of ``vertices`` (n, 3) float64
+    and ``faces`` (m, 3) int (vertices merged).
+
+    Returns:
+        (vertices (k, 3) float64, faces (f, 3) int64 outward wound, the summary), in the
+        input's units.
+    """
+    import pytetwild
+
+    faces = np.asarray(faces, dtype=np.int64)
+    points, tets = pytetwild.tetrahedralize(
+        np.asarray(vertices, dtype=np.float64), faces.astype(np.int32),
+        edge_length_fac=EDGE_LENGTH_FAC, epsilon=EPSILON, num_opt_iter=OPT_ITERATIONS,
+        stop_energy=STOP_ENERGY, quiet=True)
+    points = np.asarray(points, dtype=np.float64)
+    tets = np.asarray(tets, dtype=np.int64)
+    if len(tets) == 0:
+        return points[:0], np.zeros((0, 3), dtype=np.int64), Wrap(
+            non_manifold_edges(faces), len(faces), 0,
+            signed_volume(np.asarray(vertices, dtype=np.float64), faces), 0.0, 0)
+    tets = orient_positive(points, tets)
+    out_v, out_f = compact(points, boundary_faces(tets))
+    diagonal = float(np.linalg.norm(np.ptp(out_v, axis=0)))
+    out_v, out_f, pinches = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
+    return out_v, out_f, Wrap(non_manifold_edges(faces), len(faces), len(out_f),
+                              signed_volume(np.asarray(vertices, dtype=np.float64), faces),
+                              signed_volume(out_v, out_f), pinches)
