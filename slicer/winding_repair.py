@@ -105,8 +105,12 @@ def split_pinches(vertices: np.ndarray, faces: np.ndarray, offset: float
     manifold = np.flatnonzero(uses[edge_id] == 2)
     order = manifold[np.argsort(edge_id[manifold], kind="stable")]
     first, second = order[0::2], order[1::2]  # the two half-edges of each manifold edge
+    more_first, more_second = _radial_pairs(np.asarray(vertices, dtype=np.float64), faces,
+                                            directed, edge_id, uses)
+    first = np.concatenate([first, more_first])
+    second = np.concatenate([second, more_second])
     same = directed[first, 0] == directed[second, 0]  # same start vertex: a flipped neighbour
-    # corner of the start of `first` meets the corner of the same vertex in `second`
+    # the corner of each end of `first` meets the corner of the same vertex in `second`
     rows = np.concatenate([corner_a[first], corner_b[first]])
     cols = np.concatenate([np.where(same, corner_a[second], corner_b[second]),
                            np.where(same, corner_b[second], corner_a[second])])
@@ -128,6 +132,42 @@ def split_pinches(vertices: np.ndarray, faces: np.ndarray, offset: float
         length = np.linalg.norm(toward, axis=1)
         new_v[split] += offset * toward[split] / np.maximum(length[split], tol.tiny)[:, None]
     return new_v, new_id.reshape(m, 3).astype(np.int64), int(np.count_nonzero(copies > 1))
+
+
+def _radial_pairs(vertices: np.ndarray, faces: np.ndarray, directed: np.ndarray,
+                  edge_id: np.ndarray, uses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Around each edge of 4 or more faces, the pairs of half-edges whose faces bound the same
+    wedge of solid: faces sorted by angle around the edge, each joined to its neighbour on
+    the side its normal points away from. Returns two (p,) int64 half-edge indices."""
+    crowded = np.flatnonzero(uses[edge_id] > 2)
+    if not len(crowded):
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    edge = edge_id[crowded]
+    lo = np.minimum(directed[crowded, 0], directed[crowded, 1])
+    hi = np.maximum(directed[crowded, 0], directed[crowded, 1])
+    axis = vertices[hi] - vertices[lo]
+    axis /= np.maximum(np.linalg.norm(axis, axis=1), tol.tiny)[:, None]
+    face = crowded // 3
+    third = faces[face, (crowded % 3 + 2) % 3]
+    radial = vertices[third] - vertices[lo]
+    radial -= np.einsum("ij,ij->i", radial, axis)[:, None] * axis
+    # per edge, angles measured from the radial direction of its first half-edge
+    _, start, size = np.unique(edge, return_index=True, return_counts=True)
+    group = np.searchsorted(edge[start], edge)
+    ref_x = radial[start][group]
+    ref_y = np.cross(axis, ref_x)
+    angle = np.arctan2(np.einsum("ij,ij->i", radial, ref_y),
+                       np.einsum("ij,ij->i", radial, ref_x))
+    order = np.lexsort((angle, edge))
+    crowded, axis, radial, group = crowded[order], axis[order], radial[order], group[order]
+    begin = np.cumsum(size) - size  # first sorted position of each edge's group
+    position = np.arange(len(crowded))
+    after = begin[group] + (position - begin[group] + 1) % size[group]
+    tri = vertices[faces[crowded // 3]]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    # the solid lies on the side of increasing angle where the normal points against it
+    inside_ahead = np.einsum("ij,ij->i", normal, np.cross(axis, radial)) < 0
+    return crowded[inside_ahead], crowded[after[inside_ahead]]
 
 
 def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, Wrap]:
