@@ -85,7 +85,7 @@ def _stacked_boxes(size: float = 20.0) -> trimesh.Trimesh:
     low = trimesh.creation.box(extents=(size, size, size))
     high = low.copy()
     high.apply_translation([0.0, 0.0, size])
-    both = trimesh.util.concatenate([low, high])
+    both = low + high
     both.merge_vertices()
     return both
 
@@ -145,7 +145,7 @@ def test_boxes_touching_along_an_edge_become_two_shells() -> None:
     low = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
     high = low.copy()
     high.apply_translation([10.0, 10.0, 0.0])  # shares the vertical edge x = y = 5
-    both = trimesh.util.concatenate([low, high])
+    both = low + high
     both.merge_vertices()
     assert non_manifold_edges(np.asarray(both.faces)) == 1
     v, f, split = split_pinches(np.asarray(both.vertices), np.asarray(both.faces), 1e-4)
