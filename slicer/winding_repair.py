@@ -170,6 +170,44 @@ def _radial_pairs(vertices: np.ndarray, faces: np.ndarray, directed: np.ndarray,
     return crowded[inside_ahead], crowded[after[inside_ahead]]
 
 
+def bisect_crowded(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Split every edge of 3 or more faces at its midpoint (each of its faces into two), where
+    none of those faces has another such edge; ``split_pinches`` then parts the midpoint where
+    both ends of the edge are shared by the touching parts.
+
+    Args:
+        vertices: (n, 3) float64. faces: (m, 3) int.
+
+    Returns:
+        (vertices (n + e, 3) float64, faces (m + f, 3) int64).
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
+    _, edge_id, uses = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True,
+                                 return_counts=True)
+    edge_id = edge_id.ravel()
+    crowded = uses[edge_id] > 2  # (3m,) per half-edge
+    per_face = crowded.reshape(-1, 3).sum(axis=1)
+    blocked = np.zeros(len(uses), dtype=bool)
+    blocked[edge_id[crowded & np.repeat(per_face > 1, 3)]] = True
+    chosen = np.flatnonzero(crowded & ~blocked[edge_id])
+    if not len(chosen):
+        return np.asarray(vertices, dtype=np.float64), faces
+    edges, mid_of = np.unique(edge_id[chosen], return_inverse=True)
+    first = np.searchsorted(edge_id[chosen][np.argsort(edge_id[chosen], kind="stable")],
+                            edges)
+    ends = directed[chosen[np.argsort(edge_id[chosen], kind="stable")][first]]
+    mids = 0.5 * (vertices[ends[:, 0]] + vertices[ends[:, 1]])
+    mid = len(vertices) + mid_of
+    face, k = chosen // 3, chosen % 3
+    a, b, c = faces[face, k], faces[face, (k + 1) % 3], faces[face, (k + 2) % 3]
+    keep = np.ones(len(faces), dtype=bool)
+    keep[face] = False
+    halves = np.vstack([np.column_stack([a, mid, c]), np.column_stack([mid, b, c])])
+    return (np.vstack([np.asarray(vertices, dtype=np.float64), mids]),
+            np.vstack([faces[keep], halves]))
+
+
 def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, Wrap]:
     """The boundary of fTetWild's winding-number tet mesh of ``vertices`` (n, 3) float64
     and ``faces`` (m, 3) int (vertices merged).
@@ -195,6 +233,10 @@ def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarra
     out_v, out_f = compact(points, boundary_faces(tets))
     diagonal = float(np.linalg.norm(np.ptp(out_v, axis=0)))
     out_v, out_f, pinches = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
+    if non_manifold_edges(out_f):  # touching along an edge whose ends the parts share
+        out_v, out_f = bisect_crowded(out_v, out_f)
+        out_v, out_f, more = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
+        pinches += more
     return out_v, out_f, Wrap(non_manifold_edges(faces), len(faces), len(out_f),
                               signed_volume(np.asarray(vertices, dtype=np.float64), faces),
                               signed_volume(out_v, out_f), pinches)

@@ -12,7 +12,13 @@ from core.errors import InputError
 from mesp_cell.cli import main
 from slicer.mesh_io import load_surface
 from slicer.repair import fill_holes, load_repaired, repair_offer
-from slicer.winding_repair import boundary_faces, non_manifold_edges, split_pinches, wrap
+from slicer.winding_repair import (
+    bisect_crowded,
+    boundary_faces,
+    non_manifold_edges,
+    split_pinches,
+    wrap,
+)
 
 
 def _open_cup(size: float = 30.0) -> trimesh.Trimesh:
@@ -153,4 +159,19 @@ def test_boxes_touching_along_an_edge_become_two_shells() -> None:
     apart = trimesh.Trimesh(v, f, process=False)
     assert apart.is_watertight and apart.is_winding_consistent
     assert non_manifold_edges(f) == 0 and apart.body_count == 2
+    assert apart.volume == pytest.approx(2000.0, rel=1e-4)
+
+
+def test_bisecting_a_crowded_edge_keeps_the_surface_closed() -> None:
+    low = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+    high = low.copy()
+    high.apply_translation([10.0, 10.0, 0.0])
+    both = low + high
+    both.merge_vertices()
+    v, f = bisect_crowded(np.asarray(both.vertices), np.asarray(both.faces))
+    assert len(v) == len(both.vertices) + 1 and len(f) == len(both.faces) + 4
+    assert non_manifold_edges(f) == 2  # the two halves of the shared edge
+    v, f, split = split_pinches(v, f, 1e-4)
+    apart = trimesh.Trimesh(v, f, process=False)
+    assert split == 3 and apart.is_watertight and apart.body_count == 2
     assert apart.volume == pytest.approx(2000.0, rel=1e-4)
