@@ -13,9 +13,12 @@ surface's notes, so the report and the command say it.
 
 from __future__ import annotations
 
+import multiprocessing
+import queue as queue_module
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -25,6 +28,10 @@ from core.tolerance import tol
 from slicer.config import ModelConfig
 from slicer.mesh_io import Surface, load_surface
 from slicer.winding_repair import wrap
+
+# Seconds the refusal of a non-manifold surface waits for the check that --repair works.
+OFFER_SECONDS = 30.0
+_TIMED_OUT = "timed out"
 
 
 @dataclass(frozen=True)
@@ -176,12 +183,52 @@ def _load_wrapped(path: Path, units: str | ModelConfig, mesh: trimesh.Trimesh) -
 def repair_offer(path: str | Path, units: str | ModelConfig, refusal: InputError
                  ) -> InputError:
     """The refusal of an open or non-manifold surface with ``--repair`` as its fix where the
-    repair was tried here and works; ``refusal`` unchanged otherwise."""
-    if _repairable(refusal) is None:
+    repair was tried here and works; ``refusal`` unchanged otherwise.
+
+    A non-manifold surface is wrapped in a child process given ``OFFER_SECONDS`` (fTetWild's
+    time grows with the input's faces); past that the refusal says ``--repair`` was not
+    checked, beside its fix."""
+    kind = _repairable(refusal)
+    if kind is None:
         return refusal
+    if kind == "open":
+        try:
+            what = load_repaired(path, units).notes[0]
+        except InputError:
+            return refusal
+    else:
+        checked = _wrap_within(Path(path), units, OFFER_SECONDS)
+        if checked is None:
+            return refusal
+        what = checked
+        if what == _TIMED_OUT:
+            return InputError(refusal.problem, f"{refusal.fix}; or try --repair (fTetWild's "
+                              f"wrap: not checked here, it takes over {OFFER_SECONDS:.0f} s "
+                              "on this mesh)")
+    return InputError(refusal.problem,
+                      f"re-run with --repair (checked: it {what.removeprefix('--repair: ')})")
+
+
+def _wrap_note(path: Path, units: str | ModelConfig, queue: Any) -> None:
+    """Child process: ``load_repaired``'s first note, or None where it is refused."""
     try:
-        repaired = load_repaired(path, units)
+        queue.put(load_repaired(path, units).notes[0])
     except InputError:
-        return refusal
-    what = repaired.notes[0].removeprefix("--repair: ")
-    return InputError(refusal.problem, f"re-run with --repair (checked: it {what})")
+        queue.put(None)
+
+
+def _wrap_within(path: Path, units: str | ModelConfig, seconds: float) -> str | None:
+    """``load_repaired``'s first note (None: refused), or ``_TIMED_OUT`` after ``seconds``."""
+    context = multiprocessing.get_context("spawn")  # fork would inherit fTetWild's threads
+    queue = context.Queue()
+    child = context.Process(target=_wrap_note, args=(path, units, queue), daemon=True)
+    child.start()
+    try:
+        note: str | None = queue.get(timeout=seconds)
+    except queue_module.Empty:
+        note = _TIMED_OUT
+    finally:
+        if child.is_alive():
+            child.kill()
+        child.join()
+    return note

@@ -10,6 +10,7 @@ import trimesh
 
 from core.errors import InputError
 from mesp_cell.cli import main
+from slicer import repair
 from slicer.mesh_io import load_surface
 from slicer.repair import fill_holes, load_repaired, repair_offer
 from slicer.winding_repair import (
@@ -175,3 +176,17 @@ def test_bisecting_a_crowded_edge_keeps_the_surface_closed() -> None:
     apart = trimesh.Trimesh(v, f, process=False)
     assert split == 3 and apart.is_watertight and apart.body_count == 2
     assert apart.volume == pytest.approx(2000.0, rel=1e-4)
+
+
+def test_a_wrap_past_its_time_is_not_offered_as_checked(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = tmp_path / "stacked.obj"
+    _stacked_boxes(20.0).export(path)
+    with pytest.raises(InputError) as refused:
+        load_surface(path)
+    monkeypatch.setattr(repair, "OFFER_SECONDS", 0.0)
+    offer = repair_offer(path, "mm", refused.value)
+    assert offer.problem == refused.value.problem
+    assert offer.fix.startswith(refused.value.fix)
+    assert "or try --repair (fTetWild's wrap: not checked here" in offer.fix
+    assert "checked: it" not in offer.fix
