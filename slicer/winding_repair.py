@@ -7,8 +7,10 @@ fTetWild is built for such input: it meshes the space around the triangles and k
 inside by the generalized winding number, so the boundary of its tet mesh is a closed,
 manifold surface within its envelope (``EPSILON`` of the bounding-box diagonal) of the input.
 The wrap is coarse (``EDGE_LENGTH_FAC``): only its boundary is used, and its accuracy is the
-envelope, not the edge length. The wrapped surface then goes through ``load_surface``'s checks
-like any other, and one note says what changed (edges, faces, volume before and after).
+envelope, not the edge length. Where parts of the wrap touch along an edge or at a point, the
+tet boundary is itself non-manifold there: the touching vertices are split into one copy per
+part (``split_pinches``), so the parts become separate closed shells. The wrapped surface then
+goes through ``load_surface``'s checks like any other, and one note says what changed.
 """
 
 from __future__ import annotations
