@@ -1,4 +1,5 @@
-"""Repair of open scans on request (``mesp slice --repair``): every hole closed, and said so.
+"""Repair on request (``mesp slice --repair``): every hole closed, or a non-manifold surface
+wrapped (``slicer.winding_repair``), and said so.
 
 ``mesh_io.load_surface`` fills only cracks (holes small against the model) and refuses a real
 opening rather than guess it shut. A scan or a CT segmentation is often open where the scanner
@@ -12,9 +13,12 @@ surface's notes, so the report and the command say it.
 
 from __future__ import annotations
 
+import multiprocessing
+import queue as queue_module
 import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import trimesh
@@ -23,6 +27,11 @@ from core.errors import InputError
 from core.tolerance import tol
 from slicer.config import ModelConfig
 from slicer.mesh_io import Surface, load_surface
+from slicer.winding_repair import wrap
+
+# Seconds the refusal of a non-manifold surface waits for the check that --repair works.
+OFFER_SECONDS = 30.0
+_TIMED_OUT = "timed out"
 
 
 @dataclass(frozen=True)
@@ -79,20 +88,33 @@ def fill_holes(vertices: np.ndarray, faces: np.ndarray
         len(count), len(boundary), float(area.sum()), float(perimeter.max()))
 
 
-def load_repaired(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
-    """``load_surface``, with every hole closed first where the surface is open.
+def _repairable(refusal: InputError) -> str | None:
+    """Which repair answers ``load_surface``'s refusal: "open" (holes), "non-manifold"
+    (closed, with edges of 3 or more faces), or None (another cause)."""
+    if "not watertight" not in refusal.problem:
+        return None
+    if "open edges" in refusal.problem:
+        return "open"
+    return "non-manifold" if "non-manifold edges" in refusal.problem else None
 
-    A closed surface is loaded as it is (a note says there was nothing to repair).
+
+def load_repaired(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
+    """``load_surface``, with every hole closed first where the surface is open, or wrapped by
+    fTetWild (``slicer.winding_repair``) where it is closed but non-manifold.
+
+    A surface that loads as it is is returned as it is (a note says there was nothing to
+    repair).
 
     Raises:
-        InputError: what ``load_surface`` raises for a reason other than an open surface,
-            or the surface is still not closed after the fill (non-manifold edges).
+        InputError: what ``load_surface`` raises for another reason, or the repaired surface
+            is still refused (overlapping sheets, edges shared by 3 faces after the fill).
     """
     path = Path(path)
     try:
         surface = load_surface(path, units)
     except InputError as exc:
-        if "not watertight" not in exc.problem or "open edges" not in exc.problem:
+        kind = _repairable(exc)
+        if kind is None:
             raise
     else:
         return replace(surface, notes=(*surface.notes, "--repair: the surface is closed, "
@@ -101,6 +123,8 @@ def load_repaired(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
     if isinstance(mesh, trimesh.Scene):
         mesh = mesh.to_geometry()
     mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    if kind == "non-manifold":
+        return _load_wrapped(path, units, mesh)
     mesh.update_faces(mesh.unique_faces() & mesh.nondegenerate_faces())
     vertices, faces, fill = fill_holes(np.asarray(mesh.vertices, dtype=np.float64),
                                        np.asarray(mesh.faces))
@@ -116,24 +140,95 @@ def load_repaired(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
                 "its surface is not a set of clean holes (edges shared by 3 faces, or "
                 "overlapping sheets): close it in a mesh editor (e.g. Blender 3D-Print "
                 "Toolbox, Meshmixer)") from exc
-    # mm per file unit as loaded: the units and any --scale-to
-    scale = (float(np.ptp(np.asarray(surface.vertices), axis=0).max())
-             / max(float(np.ptp(vertices, axis=0).max()), tol.tiny))
+    scale = _scale(surface, vertices)
     line = (f"--repair: filled {fill.holes} hole{'s' if fill.holes != 1 else ''} "
             f"({fill.open_edges} open edges, largest {fill.largest_perimeter * scale:.1f} mm "
             f"round), added {fill.area_added * scale**2:.0f} mm^2 of surface")
     return replace(surface, source=path, notes=(line, *surface.notes))
 
 
+def _scale(surface: Surface, vertices: np.ndarray) -> float:
+    """mm per file unit as loaded (the units and any --scale-to)."""
+    return (float(np.ptp(np.asarray(surface.vertices), axis=0).max())
+            / max(float(np.ptp(vertices, axis=0).max()), tol.tiny))
+
+
+def _load_wrapped(path: Path, units: str | ModelConfig, mesh: trimesh.Trimesh) -> Surface:
+    """``load_surface`` on fTetWild's wrap of the closed, non-manifold ``mesh``."""
+    vertices, faces, wrapped = wrap(np.asarray(mesh.vertices, dtype=np.float64),
+                                    np.asarray(mesh.faces))
+    fix = ("its surface does not bound a solid fTetWild can find (overlapping or open "
+           "sheets): close it in a mesh editor (e.g. Blender 3D-Print Toolbox, Meshmixer)")
+    if not len(faces):
+        raise InputError(f"{path.name}: fTetWild's winding-number test finds no inside "
+                         "(--repair)", fix)
+    with tempfile.TemporaryDirectory(prefix="mesp-repair-") as scratch:
+        closed = Path(scratch) / f"{path.stem}.ply"
+        trimesh.Trimesh(vertices, faces, process=False).export(closed)
+        try:
+            surface = load_surface(closed, units)
+        except InputError as exc:
+            raise InputError(
+                f"{path.name} is still refused after --repair wrapped it with fTetWild "
+                f"({exc.problem.replace(closed.name, 'the wrapped surface')})", fix) from exc
+    scale = _scale(surface, vertices)
+    line = (f"--repair: wrapped by fTetWild's winding-number test ({wrapped.non_manifold_edges} "
+            f"non-manifold edges resolved, {wrapped.pinches} touching vertices split, "
+            f"{wrapped.faces_before} -> {wrapped.faces_after} "
+            f"faces, volume {wrapped.volume_before * scale**3:.0f} -> "
+            f"{surface.volume_mm3:.0f} mm^3)")
+    return replace(surface, source=path, notes=(line, *surface.notes))
+
+
 def repair_offer(path: str | Path, units: str | ModelConfig, refusal: InputError
                  ) -> InputError:
-    """The refusal of an open surface with ``--repair`` as its fix where the repair was
-    tried here and closes it; ``refusal`` unchanged otherwise."""
-    if "not watertight" not in refusal.problem or "open edges" not in refusal.problem:
+    """The refusal of an open or non-manifold surface with ``--repair`` as its fix where the
+    repair was tried here and works; ``refusal`` unchanged otherwise.
+
+    A non-manifold surface is wrapped in a child process given ``OFFER_SECONDS`` (fTetWild's
+    time grows with the input's faces); past that the refusal says ``--repair`` was not
+    checked, beside its fix."""
+    kind = _repairable(refusal)
+    if kind is None:
         return refusal
+    if kind == "open":
+        try:
+            what = load_repaired(path, units).notes[0]
+        except InputError:
+            return refusal
+    else:
+        checked = _wrap_within(Path(path), units, OFFER_SECONDS)
+        if checked is None:
+            return refusal
+        what = checked
+        if what == _TIMED_OUT:
+            return InputError(refusal.problem, f"{refusal.fix}; or try --repair (fTetWild's "
+                              f"wrap: not checked here, it takes over {OFFER_SECONDS:.0f} s "
+                              "on this mesh)")
+    return InputError(refusal.problem,
+                      f"re-run with --repair (checked: it {what.removeprefix('--repair: ')})")
+
+
+def _wrap_note(path: Path, units: str | ModelConfig, queue: Any) -> None:
+    """Child process: ``load_repaired``'s first note, or None where it is refused."""
     try:
-        repaired = load_repaired(path, units)
+        queue.put(load_repaired(path, units).notes[0])
     except InputError:
-        return refusal
-    what = repaired.notes[0].removeprefix("--repair: ")
-    return InputError(refusal.problem, f"re-run with --repair (checked: it {what})")
+        queue.put(None)
+
+
+def _wrap_within(path: Path, units: str | ModelConfig, seconds: float) -> str | None:
+    """``load_repaired``'s first note (None: refused), or ``_TIMED_OUT`` after ``seconds``."""
+    context = multiprocessing.get_context("spawn")  # fork would inherit fTetWild's threads
+    queue = context.Queue()
+    child = context.Process(target=_wrap_note, args=(path, units, queue), daemon=True)
+    child.start()
+    try:
+        note: str | None = queue.get(timeout=seconds)
+    except queue_module.Empty:
+        note = _TIMED_OUT
+    finally:
+        if child.is_alive():
+            child.kill()
+        child.join()
+    return note

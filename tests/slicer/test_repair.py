@@ -10,8 +10,16 @@ import trimesh
 
 from core.errors import InputError
 from mesp_cell.cli import main
+from slicer import repair
 from slicer.mesh_io import load_surface
 from slicer.repair import fill_holes, load_repaired, repair_offer
+from slicer.winding_repair import (
+    bisect_crowded,
+    boundary_faces,
+    non_manifold_edges,
+    split_pinches,
+    wrap,
+)
 
 
 def _open_cup(size: float = 30.0) -> trimesh.Trimesh:
@@ -76,3 +84,109 @@ def test_slice_offers_and_applies_repair(tmp_path: Path,
     printed = capsys.readouterr().out
     assert "note: model: --repair: filled 1 hole (4 open edges" in printed
     assert (out / "tetmesh.npz").is_file()
+
+
+def _stacked_boxes(size: float = 20.0) -> trimesh.Trimesh:
+    """Two closed cubes of ``size`` mm, one on the other: the face between them is there
+    twice (once per cube), and every edge of it is used by 4 faces."""
+    low = trimesh.creation.box(extents=(size, size, size))
+    high = low.copy()
+    high.apply_translation([0.0, 0.0, size])
+    both = low + high
+    both.merge_vertices()
+    return both
+
+
+def test_wrap_resolves_an_internal_face() -> None:
+    boxes = _stacked_boxes(20.0)
+    assert non_manifold_edges(np.asarray(boxes.faces)) > 0
+    v, f, summary = wrap(np.asarray(boxes.vertices), np.asarray(boxes.faces))
+    closed = trimesh.Trimesh(v, f, process=False)
+    assert closed.is_watertight and closed.is_winding_consistent
+    assert non_manifold_edges(f) == 0
+    assert summary.volume_before == pytest.approx(16000.0)
+    assert closed.volume == pytest.approx(16000.0, rel=0.03)
+    assert summary.volume_after == pytest.approx(closed.volume)
+
+
+def test_boundary_faces_of_one_tet_point_outwards() -> None:
+    v = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]])
+    f = boundary_faces(np.array([[0, 1, 2, 3]]))
+    assert len(f) == 4
+    assert trimesh.Trimesh(v, f, process=False).volume == pytest.approx(1 / 6)
+
+
+def test_non_manifold_refusal_offers_and_applies_the_wrap(tmp_path: Path) -> None:
+    path = tmp_path / "stacked.obj"
+    _stacked_boxes(20.0).export(path)
+    with pytest.raises(InputError) as refused:
+        load_surface(path)
+    assert "non-manifold edges" in refused.value.problem
+    offer = repair_offer(path, "mm", refused.value)
+    assert "re-run with --repair (checked: it wrapped by fTetWild" in offer.one_line()
+    surface = load_repaired(path)
+    mesh = surface.as_trimesh()
+    assert mesh.is_watertight and non_manifold_edges(surface.faces) == 0
+    assert surface.volume_mm3 == pytest.approx(16000.0, rel=0.03)
+    assert surface.notes[0].startswith("--repair: wrapped by fTetWild's winding-number test (")
+    assert "non-manifold edges resolved" in surface.notes[0]
+    assert "volume 16000 -> " in surface.notes[0]
+
+
+def test_a_soup_is_still_refused(tmp_path: Path) -> None:
+    rng = np.random.default_rng(3)
+    corners = rng.uniform(0.0, 30.0, size=(40, 1, 3)) + rng.uniform(0.0, 5.0, size=(40, 3, 3))
+    soup = trimesh.Trimesh(corners.reshape(-1, 3), np.arange(120).reshape(-1, 3),
+                           process=False)
+    path = tmp_path / "soup.stl"
+    soup.export(path)
+    with pytest.raises(InputError) as refused:
+        load_surface(path)
+    assert "not watertight" in refused.value.problem
+    assert repair_offer(path, "mm", refused.value) is refused.value
+    with pytest.raises(InputError):
+        load_repaired(path)
+
+
+def test_boxes_touching_along_an_edge_become_two_shells() -> None:
+    low = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+    high = low.copy()
+    high.apply_translation([10.0, 10.0, 0.0])  # shares the vertical edge x = y = 5
+    both = low + high
+    both.merge_vertices()
+    assert non_manifold_edges(np.asarray(both.faces)) == 1
+    v, f, split = split_pinches(np.asarray(both.vertices), np.asarray(both.faces), 1e-4)
+    assert split == 2 and len(v) == len(both.vertices) + 2
+    apart = trimesh.Trimesh(v, f, process=False)
+    assert apart.is_watertight and apart.is_winding_consistent
+    assert non_manifold_edges(f) == 0 and apart.body_count == 2
+    assert apart.volume == pytest.approx(2000.0, rel=1e-4)
+
+
+def test_bisecting_a_crowded_edge_keeps_the_surface_closed() -> None:
+    low = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+    high = low.copy()
+    high.apply_translation([10.0, 10.0, 0.0])
+    both = low + high
+    both.merge_vertices()
+    v, f = bisect_crowded(np.asarray(both.vertices), np.asarray(both.faces))
+    assert len(v) == len(both.vertices) + 1 and len(f) == len(both.faces) + 4
+    assert non_manifold_edges(f) == 2  # the two halves of the shared edge
+    v, f, split = split_pinches(v, f, 1e-4)
+    apart = trimesh.Trimesh(v, f, process=False)
+    assert split == 3 and apart.is_watertight and apart.body_count == 2
+    assert apart.volume == pytest.approx(2000.0, rel=1e-4)
+
+
+def test_a_wrap_past_its_time_is_not_offered_as_checked(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = tmp_path / "stacked.obj"
+    _stacked_boxes(20.0).export(path)
+    with pytest.raises(InputError) as refused:
+        load_surface(path)
+    monkeypatch.setattr(repair, "OFFER_SECONDS", 0.0)
+    offer = repair_offer(path, "mm", refused.value)
+    assert offer.problem == refused.value.problem
+    assert offer.fix.startswith(refused.value.fix)
+    assert "or try --repair (fTetWild's wrap: not checked here" in offer.fix
+    assert "checked: it" not in offer.fix
