@@ -29,13 +29,12 @@ from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from core.tolerance import tol
+from slicer.toolpath.layer_nearest import face_tree, inside_barycentric, nearest_on_layer
 from slicer.toolpath.lines import SurfaceLines
-from slicer.toolpath.mapback import barycentric
 from slicer.toolpath.ordering import Piece
 from slicer.toolpath.ridge import ridge_line
 from slicer.toolpath.surface import boundary_loops
@@ -121,20 +120,11 @@ class SpiralPlanner:
 
     def project(self, p: NDArray[np.float64]) -> Blend:
         """The points of the layer nearest to ``p`` ((k, 3) mm), with face and bary."""
-        tri = self.vertices[self.faces]
         if self._tree is None:
-            self._tree = cKDTree(tri.mean(axis=1))
-        k = min(NEAREST_FACES, len(self.faces))
-        _, cand = self._tree.query(p, k=k)
-        cand = np.asarray(cand).reshape(len(p), k)
-        closest = trimesh.triangles.closest_point(tri[cand.ravel()], np.repeat(p, k, axis=0))
-        d = np.linalg.norm(closest - np.repeat(p, k, axis=0), axis=1).reshape(len(p), k)
-        d = np.where(np.isfinite(d), d, np.inf)  # a degenerate triangle (marching tets)
-        best = np.argmin(d, axis=1)
-        face = cand[np.arange(len(p)), best].astype(np.int32)
-        q = closest.reshape(len(p), k, 3)[np.arange(len(p)), best]
-        bary = np.clip(barycentric(q, self.vertices, self.faces, face), 0.0, None)
-        bary /= np.maximum(bary.sum(axis=1, keepdims=True), tol.zero)
+            self._tree = face_tree(self.vertices, self.faces)
+        q, nearest = nearest_on_layer(p, self.vertices, self.faces, NEAREST_FACES, self._tree)
+        face = nearest.astype(np.int32)
+        bary = inside_barycentric(q, self.vertices, self.faces, face)
         return Blend(q, face, bary)
 
     def blend(self, a: Piece, lam: float, extra: float, b: Piece

@@ -19,15 +19,13 @@ overlap (``coverage_miss``) is smaller (``strategy``).
 from __future__ import annotations
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
-from scipy.spatial import cKDTree
 
 from core.stages import Layers, Pattern, Toolpath
 from core.tolerance import tol
 from slicer.toolpath.coverage import layer_coverage
+from slicer.toolpath.layer_nearest import inside_barycentric, nearest_on_layer
 from slicer.toolpath.linking import LinkedPath
-from slicer.toolpath.mapback import barycentric
 from slicer.toolpath.results import Waypoints
 
 JOIN_SCALE = 0.5  # width of a join over the width of the lines it joins
@@ -41,18 +39,9 @@ def locate(points: NDArray[np.float64], vertices: NDArray[np.float64],
            ) -> tuple[NDArray[np.float64], NDArray[np.int32], NDArray[np.float64]]:
     """The layer point nearest to each of ``points`` ((P, 3) mm), among the NEAREST_FACES
     faces whose centroids are nearest: (P, 3) mm, its face (P,) and barycentrics (P, 3)."""
-    tri = vertices[faces]
-    k = min(NEAREST_FACES, len(faces))
-    _, cand = cKDTree(tri.mean(axis=1)).query(points, k=k)
-    cand = np.asarray(cand).reshape(len(points), k)
-    rep = np.repeat(points, k, axis=0)
-    closest = trimesh.triangles.closest_point(tri[cand.ravel()], rep)
-    d = np.linalg.norm(closest - rep, axis=1).reshape(len(points), k)
-    best = np.argmin(np.where(np.isfinite(d), d, np.inf), axis=1)
-    face = cand[np.arange(len(points)), best].astype(np.int32)
-    q = closest.reshape(len(points), k, 3)[np.arange(len(points)), best]
-    bary = np.clip(barycentric(q, vertices, faces, face), 0.0, None)
-    bary /= np.maximum(bary.sum(axis=1, keepdims=True), tol.zero)
+    q, nearest = nearest_on_layer(points, vertices, faces, NEAREST_FACES)
+    face = nearest.astype(np.int32)
+    bary = inside_barycentric(q, vertices, faces, face)
     return np.einsum("pk,pkj->pj", bary, vertices[faces[face]]), face, bary
 
 

@@ -13,13 +13,12 @@ from the volume (the caller's flow fit, within the narrowest and widest filament
 from __future__ import annotations
 
 import numpy as np
-import trimesh
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
 from core.tolerance import tol
+from slicer.toolpath.layer_nearest import inside_barycentric, nearest_on_layer
 from slicer.toolpath.lines import SurfaceLines, empty_lines
-from slicer.toolpath.mapback import barycentric
 
 TIP_INSET = 0.1  # each end of the chord pulled in by this share of it (at most W / 2): the
 # line's band over a disc D across is then about D wide (0.2: 1.3 D, spilling over its sides)
@@ -49,7 +48,7 @@ def tip_line(vertices: NDArray[np.float64], faces: NDArray[np.int32], width: flo
     t = d @ axis
     reach = np.linspace(float(t.min()), float(t.max()), TIP_POINTS)
     target = c + reach[:, None] * axis
-    foot, face = _feet(v, f, centre, target)
+    foot, face = nearest_on_layer(target, v, f, NEAREST_FACES, cKDTree(centre))
     chord = float(t.max() - t.min())
     on = np.linalg.norm(foot - target, axis=1) <= ON_SURFACE * max(chord, tol.zero)
     # the run of points on the surface around the centroid (a bent tip: one side)
@@ -64,23 +63,7 @@ def tip_line(vertices: NDArray[np.float64], faces: NDArray[np.int32], width: flo
     keep = keep[(reach[keep] >= reach[lo] + inset) & (reach[keep] <= reach[hi - 1] - inset)]
     if len(keep) < 2:
         return empty_lines()
-    bary = np.clip(barycentric(foot[keep], v, f.astype(np.int32), face[keep]), 0.0, None)
-    bary /= np.maximum(bary.sum(axis=1, keepdims=True), tol.zero)
+    bary = inside_barycentric(foot[keep], v, f.astype(np.int32), face[keep].astype(np.int32))
     return SurfaceLines(points=foot[keep], face=face[keep].astype(np.int32), bary=bary,
                         line=np.zeros(len(keep), dtype=np.int32),
                         closed=np.zeros(1, dtype=bool))
-
-
-def _feet(v: NDArray[np.float64], f: NDArray[np.int64], centre: NDArray[np.float64],
-          target: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
-    """The nearest surface point (k, 3) mm to each target point and its face (k,)."""
-    k = min(NEAREST_FACES, len(f))
-    _, cand = cKDTree(centre).query(target, k=k)
-    cand = np.asarray(cand, dtype=np.int64).reshape(len(target), k)
-    tri = v[f[cand.ravel()]]
-    closest = trimesh.triangles.closest_point(tri, np.repeat(target, k, axis=0))
-    dist = np.linalg.norm(closest - np.repeat(target, k, axis=0), axis=1).reshape(len(target), k)
-    dist = np.where(np.isfinite(dist), dist, np.inf)
-    best = np.argmin(dist, axis=1)
-    rows = np.arange(len(target))
-    return closest.reshape(len(target), k, 3)[rows, best], cand[rows, best]
