@@ -122,6 +122,13 @@ class KinematicTwin:
         elif due - now > self.BATCH_S:
             time.sleep(due - now)
 
+    def sim_now(self) -> float:
+        """s, the twin's own simulated time: where its motion has got to (the shared clock's
+        time at rest). What the servo loop decides (an extruder switch) happens at this time,
+        also while an earlier switch holds the shared clock back (``extruder_switch``)."""
+        sim = self._sim
+        return self.clock.now() if sim is None else sim
+
     def end_motion(self) -> None:
         """The arm rests: simulated time runs with the clock until the next motion."""
         self._sim = None

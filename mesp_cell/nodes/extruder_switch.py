@@ -19,7 +19,10 @@ On the twin the latency need not move any ink: the switcher holds the shared clo
 (``SimClock.hold``) at the time the switch was decided until the extruder node acknowledged
 it, so the emulated extruder takes it at that simulated time whatever the wall-clock latency
 (on a loaded host, at time scale 1 too, where nothing is recorded); its latency measured on
-that clock is then 0 and so is its excess (docs/robustness.md).
+that clock is then 0 and so is its excess (docs/robustness.md). A switch is timed by the
+twin's own simulated time (``decided``), not by the shared clock: while an earlier switch
+still holds the clock back, a later one read the held time, so a stop and the start after a
+travel shorter than the latency landed together and the screw ran through the travel.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ log = logging.getLogger("mesp.robot")
 
 HOLD_KEY = "switch"  # the switches' hold on the twin's shared clock
 HOLD_S = 1.0  # s of wall time a switch holds the clock at most (the bus request's timeout)
+DUE_WAIT_S = 0.05  # s of wall time a switch waits at most for the shared clock to reach it
 
 
 class Switch(NamedTuple):
@@ -69,14 +73,19 @@ class Switcher:
         time_scale: the twin's speed-up (1 on the real cell).
         sim_clock: the twin's shared clock, held at each switch's time until the extruder
             took it (None on the real cell).
+        decided: s, the time a switch is decided at (the twin's own simulated time,
+            ``KinematicTwin.sim_now``); default ``clock``.
     """
 
     def __init__(self, send: Callable[[str, float], str], clock: Callable[[], float],
-                 time_scale: float, sim_clock: SimClock | None = None) -> None:
+                 time_scale: float, sim_clock: SimClock | None = None,
+                 decided: Callable[[], float] | None = None) -> None:
         self.send, self._clock, self.time_scale = send, clock, float(time_scale)
         self.sim_clock = sim_clock
+        self._decided = decided or clock
         self._queue: queue.Queue[Switch] = queue.Queue()
         self._latest = float("-inf")
+        self._latest_due = float("-inf")
         self._pending: deque[float] = deque()  # due of each switch queued and not yet sent
         self._pending_lock = threading.Lock()
 
@@ -91,7 +100,8 @@ class Switcher:
         """Queue a switch decided now (thread-safe; returns at once); on the twin, hold the
         clock at now until it is sent."""
         with self._pending_lock:
-            sw = Switch(verb, rate, step, self.clock(), job_dir)
+            self._latest_due = max(self._latest_due, self._decided())
+            sw = Switch(verb, rate, step, self._latest_due, job_dir)
             if self.sim_clock is not None:
                 self._pending.append(sw.due)
                 if len(self._pending) == 1:
@@ -118,13 +128,27 @@ class Switcher:
             except queue.Empty:
                 continue
             try:
+                if sw.step:
+                    self._await_due(sw.due)
                 why = self.send(sw.verb, sw.rate)
                 if why:
                     log.warning("extruder %s refused: %s", sw.verb, why)
                     continue
-                self._record(sw, self.clock() - sw.due)
+                # on the twin the hold lands it at ``due`` (the clock may not yet be there
+                # when the twin runs ahead of it: that is no latency)
+                self._record(sw, max(0.0, self.clock() - sw.due))
             finally:
                 self._sent()
+
+    def _await_due(self, due: float) -> None:
+        """On the twin, send a planned switch no earlier than its time: a twin running ahead of
+        the shared clock (by at most its sleep batch, 1 ms of wall time) decides it before the
+        clock gets there, and the hold then stops the clock at ``due`` until it is taken."""
+        if self.sim_clock is None:
+            return
+        end = time.monotonic() + DUE_WAIT_S
+        while self.sim_clock.now() < due and time.monotonic() < end:
+            time.sleep(0.0002)
 
     def excess_mm3(self, step: float, latency: float) -> float:
         """Nominal mm^3 a switch of ``step`` mm^3/s, ``latency`` s late on the flow's clock,

@@ -114,7 +114,8 @@ class RobotNode(RobotMoves, LifecycleNode):
             self.screw = ScrewStop(host, int(port))
         clock = getattr(self.driver, "clock", None)  # a twin's clock, shared with the extruder
         self.switcher = Switcher(self._send_switch, clock.now if clock else wall_clock,
-                                 self.servo.time_scale, clock)
+                                 self.servo.time_scale, clock,
+                                 getattr(self.driver, "sim_now", None))
         self.state_period = 1.0 / float(p.get("state_hz", 100.0))
         self.plan: StreamPlan | None = None
         self.job_id = ""

@@ -7,9 +7,8 @@ extrusion --activate`, a job sliced with the old profile is refused before it is
 moves, and a job sliced with the new profile gives the part the toolpath's volume within 1 %,
 by the emulator's hidden truth (not by the totaliser, which believes the set-point). The part's
 ink is the truth less the ink the cell extruded with the nozzle at rest (the prime and the
-leads, ``ink_at_rest`` in the job's report): on a fast twin, the wall-clock latency before
-the robot takes a stream counts ``time_scale`` times over there, so on a loaded host that
-blob alone varied by 1 % of this part at 40x.
+leads, ``ink_at_rest`` in the job's report): on a fast twin the wall-clock wait before the
+robot takes a stream counts ``time_scale`` times over there, 5-38 mm^3 (0.2-1.4 %) at 40x.
 """
 
 from __future__ import annotations
@@ -26,10 +25,7 @@ from tests.mesp_cell import synthetic
 
 ROOT = Path(__file__).resolve().parents[2]
 GAIN = 1.08  # the emulated extruder delivers 8 % more than it is asked
-TIME_SCALE = 40.0  # the calibration runs (about 7 s of wall time at 40x)
-#: the print's time scale: a twin's stall on a loaded host moves ink by its wall time x the
-#: scale (docs/runtime.md), up to 1 % of this part at 40x; 10x keeps that 4 times smaller
-PRINT_SCALE = 10.0
+TIME_SCALE = 40.0
 #: mm, the cube's edge: the example's 20 mm cube prints for 21 simulated minutes; this one
 #: has about as many paths (starts and stops, where a rate error shows) in a third of the volume
 CUBE_MM = 14.0
@@ -79,7 +75,7 @@ def test_recalibrated_cell_refuses_a_stale_job_and_prints_the_toolpath_volume(
     stale_job = tmp_path / "stale.toml"
     stale_job.write_text(job + f'\n[extrusion]\nprofile = "{FACTORY}"\n')
     cube = synthetic.write_cube(tmp_path / "cube.stl", CUBE_MM)
-    with start_cell(overrides={"time_scale": PRINT_SCALE, "true_gain": GAIN,
+    with start_cell(overrides={"time_scale": TIME_SCALE, "true_gain": GAIN,
                                "prime_s": 0.5}) as cell:
         client = cell.client()
         try:

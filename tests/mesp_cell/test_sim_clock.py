@@ -197,3 +197,30 @@ def test_a_twin_stalled_mid_period_moves_no_ink_across_a_switch(
     plant.step(wall())
     assert twin.clock.paused() == pytest.approx(stall_s - dt)  # the twin lagged (less its period)
     assert plant.volume == pytest.approx(rate * (off_k - on_k) * dt, rel=1e-3)
+
+
+def test_the_twin_times_its_decisions_by_its_own_time_not_a_held_clock(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # At rest the twin's time is the shared clock's; in a motion it is its own periods x dt,
+    # also while another writer (an extruder switch in flight) holds the clock back.
+    wall = FakeWall()
+    monkeypatch.setattr(SimClock, "wall", staticmethod(wall))
+    monkeypatch.setattr(robot_twin, "precise_sleep_until",
+                        lambda due: setattr(wall, "t", max(wall.t, due)))
+    dt = 0.002
+    clock = SimClock(1.0, tmp_path / "sim.clock", reset=True)
+    twin = KinematicTwin(ServoConfig(dt=dt, overrun_s=0.3), q0=synthetic.HOME, clock=clock)
+    twin.connect()
+    assert twin.sim_now() == pytest.approx(clock.now())
+    start = clock.now()
+    for k in range(100):
+        t0 = twin.init_period()
+        twin.servo_j(synthetic.HOME)
+        if k == 10:
+            clock.hold("switch", clock.now(), 1.0)  # a switch in flight from here on
+        twin.wait_period(t0)
+    assert clock.now() == pytest.approx(start + 10 * dt)  # held
+    assert twin.sim_now() == pytest.approx(start + 100 * dt)  # the twin's own time
+    twin.servo_stop()
+    clock.release("switch")
+    assert twin.sim_now() == pytest.approx(clock.now())
