@@ -14,7 +14,7 @@ boundary loop or many: n = round(b / spacing) lines at the even pitch b / n, flo
 of them at d = (k + 1/2) pitch from the boundary and, for odd n, one on the ridge itself
 (the medial line, ``medial.medial_lines``). On a band between two loops this is the
 two-sided fit; on a disc the rings spaced to fill its radius exactly. The strategy keeps
-these lines where they keep their spacing better than eq. 9's (``strategy.py``).
+these lines where they keep their spacing better than eq. 9's (``candidate_choice.py``).
 """
 
 from __future__ import annotations
@@ -187,7 +187,7 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
     (the pitch blended where the count changes, a line starts where it has nearly a full
     pitch of room). ridge: ``medial.medial_lines`` of the surface when the caller has it.
     laid: where a line is dropped for room, the pitch of the lines laid (``_laid_pitch``);
-    False: the blended pitch everywhere (the strategy tries both, see ``strategy.py``).
+    False: the blended pitch everywhere (both are tried, see ``candidate_choice.py``).
     Returns the lines and (n,) float64 mm, the local pitch they are laid at.
     """
     check_mesh(vertices, faces)
