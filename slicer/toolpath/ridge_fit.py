@@ -14,7 +14,7 @@ boundary loop or many: n = round(b / spacing) lines at the even pitch b / n, flo
 of them at d = (k + 1/2) pitch from the boundary and, for odd n, one on the ridge itself
 (the medial line, ``medial.medial_lines``). On a band between two loops this is the
 two-sided fit; on a disc the rings spaced to fill its radius exactly. The strategy keeps
-these lines where they keep their spacing better than eq. 9's (``strategy.py``).
+these lines where they keep their spacing better than eq. 9's (``candidate_choice.py``).
 """
 
 from __future__ import annotations
@@ -56,8 +56,11 @@ def band_across(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     turns (the ray runs along the other side, not into it). On a curved layer, where the
     chord is shorter than the way over the surface, at least twice the largest boundary
     distance along the ray (a cap's diameter over its dome). Euclidean, in the plane of
-    the ray and the vertex normal (a layer is nearly flat across one band). A boundary
-    vertex takes the mean of its interior neighbours'.
+    the ray and the vertex normal (a layer is nearly flat across one band). Where the ray
+    runs along the part (a bar's end) the reading is limited from the ridge (``FLARE``),
+    but never below twice the boundary distance where the ray crosses the ridge (a body
+    beside a neck keeps its width). A boundary vertex takes the mean of its interior
+    neighbours'.
     distance: (n,) float64 mm boundary distance (``geodesic.boundary_distance``).
     """
     check_mesh(vertices, faces)
@@ -75,7 +78,10 @@ def band_across(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     on_boundary[bnd.ravel()] = True
     ids = used[~on_boundary[used]]
     normal = vertex_normals(v, f)
+    e = edge_topology(f).edges
+    edge = float(np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1).mean()) if len(e) else 0.0
     ahead = np.zeros(len(ids))
+    ridge = np.zeros(len(ids))
     if len(ids):
         dist, foot, _ = nearest_feet(v[ids], pa, pb, 16)
         nearest = foot[np.arange(len(ids)), np.argmin(dist, axis=1)]
@@ -106,20 +112,25 @@ def band_across(vertices: NDArray[np.float64], faces: NDArray[np.integer],
         frac = (np.arange(RAY_SAMPLES) + 0.5) / RAY_SAMPLES
         x = v[ids][:, None, :] + (ahead[:, None] * frac)[..., None] * u[:, None, :]
         _, near = cKDTree(v[used]).query(x.reshape(-1, 3))
-        deepest = d[used][near].reshape(len(ids), RAY_SAMPLES).max(axis=1)
+        on_ray = d[used][near].reshape(len(ids), RAY_SAMPLES)
+        deepest = on_ray.max(axis=1)
         out[ids] = np.maximum(d[ids] + ahead, 2.0 * np.maximum(deepest, d[ids]))
-    e = edge_topology(f).edges
+        ridge = _first_peak(np.column_stack([d[ids], on_ray]), edge)
     # near the ridge (at least 0.4 of its band from the boundary, its ray ran on past the
     # ridge) a reading holds; elsewhere it is at most FLARE x the way from such a vertex
     # more: at the end of a bar the ray runs along the bar and reads its length. A ray
     # that met the boundary before it had come as far as it started from it (the far side
     # of a band is at least as far as the near one) grazed it: the limit alone there
-    edge = float(np.linalg.norm(v[e[:, 0]] - v[e[:, 1]], axis=1).mean()) if len(e) else 0.0
     deep = ids[(d[ids] >= 0.4 * out[ids]) & (d[ids] >= edge) & (ahead >= 0.5 * d[ids])]
     if len(deep):
         limit = _flare_limit(v, e, out, deep)[ids]
         grazed = (ahead < d[ids]) & np.isfinite(limit)
         out[ids] = np.where(grazed, limit, np.minimum(out[ids], limit))
+        # ... but never below twice the boundary distance where the ray crosses the ridge
+        # (its first peak): the limit from a narrow neck nearby (the strip between a rim
+        # and a hole near it) would otherwise lower the wide body beside it, which then
+        # gets too few lines and is left bare
+        out[ids] = np.where(grazed, out[ids], np.maximum(out[ids], 2.0 * ridge))
     # boundary vertices: the mean of their interior neighbours (a corner vertex with none:
     # of its neighbours along the boundary)
     src = np.concatenate([e[:, 0], e[:, 1]])
@@ -135,6 +146,18 @@ def band_across(vertices: NDArray[np.float64], faces: NDArray[np.integer],
         out[has] = total[has] / count[has]
         known = known | has
     return out
+
+
+def _first_peak(along: NDArray[np.float64], drop: float) -> NDArray[np.float64]:
+    """(p,) float64 mm, per row of ``along`` ((p, s) float64 mm, the boundary distance at
+    s points along a ray, in order) its first peak: the largest value before it first
+    falls by more than ``drop`` (sampling noise) below it; the row's maximum if it never
+    does. Past that peak the ray has crossed the ridge into the next front (a hole's, or
+    a wider body beyond a neck), whose depth is no width of the band it started in."""
+    top = np.maximum.accumulate(along, axis=1)
+    fell = along < top - drop
+    first = np.where(fell.any(axis=1), np.argmax(fell, axis=1), along.shape[1] - 1)
+    return np.asarray(top[np.arange(len(along)), first], dtype=np.float64)
 
 
 def _flare_limit(v: NDArray[np.float64], e: NDArray[np.int64], width: NDArray[np.float64],
@@ -164,7 +187,7 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
     (the pitch blended where the count changes, a line starts where it has nearly a full
     pitch of room). ridge: ``medial.medial_lines`` of the surface when the caller has it.
     laid: where a line is dropped for room, the pitch of the lines laid (``_laid_pitch``);
-    False: the blended pitch everywhere (the strategy tries both, see ``strategy.py``).
+    False: the blended pitch everywhere (both are tried, see ``candidate_choice.py``).
     Returns the lines and (n,) float64 mm, the local pitch they are laid at.
     """
     check_mesh(vertices, faces)

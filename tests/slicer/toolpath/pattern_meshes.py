@@ -97,11 +97,14 @@ def sliver_disc(radius: float, h: float, squeeze: float = 0.97
 
 
 def plate_with_holes(width: float = 44.0, height: float = 20.0, radius: float = 8.0,
-                     centre_x: float = 11.0, h: float = 0.6
+                     centre_x: float = 11.0, h: float = 0.6,
+                     centres: tuple[tuple[float, float], ...] | None = None,
                      ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
     """Flat rectangle width x height (mm, centred at the origin) with two round holes of
     ``radius`` at x = +-centre_x: thin bands above and below the holes, and a solid
-    junction between them that is no band. Edge length about h; faces normal +z."""
+    junction between them that is no band; or the holes at ``centres`` (mm). Edge length
+    about h; faces normal +z."""
+    at = centres if centres is not None else ((-centre_x, 0.0), (centre_x, 0.0))
     rng = np.random.default_rng(0)
     xs = np.arange(-width / 2, width / 2 + 1e-9, h)
     ys = np.arange(-height / 2, height / 2 + 1e-9, h)
@@ -111,16 +114,16 @@ def plate_with_holes(width: float = 44.0, height: float = 20.0, radius: float = 
     p = p + 0.1 * h * rng.uniform(-1, 1, p.shape) * inner[:, None]
     keep = np.ones(len(p), dtype=bool)
     rings = []
-    for cx in (-centre_x, centre_x):
-        keep &= np.hypot(p[:, 0] - cx, p[:, 1]) > radius + 0.3 * h
+    for cx, cy in at:
+        keep &= np.hypot(p[:, 0] - cx, p[:, 1] - cy) > radius + 0.3 * h
         a = np.linspace(0, 2 * np.pi, int(2 * np.pi * radius / h), endpoint=False)
-        rings.append(np.column_stack([cx + radius * np.cos(a), radius * np.sin(a)]))
+        rings.append(np.column_stack([cx + radius * np.cos(a), cy + radius * np.sin(a)]))
     p = np.concatenate([p[keep], *rings])
     tri = Delaunay(p).simplices
     centre = p[tri].mean(axis=1)
     solid = np.ones(len(tri), dtype=bool)
-    for cx in (-centre_x, centre_x):
-        solid &= np.hypot(centre[:, 0] - cx, centre[:, 1]) > radius
+    for cx, cy in at:
+        solid &= np.hypot(centre[:, 0] - cx, centre[:, 1] - cy) > radius
     return flat_mesh(p, tri[solid])
 
 

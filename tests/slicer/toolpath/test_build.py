@@ -20,7 +20,6 @@ from tests.slicer.toolpath.pattern_meshes import (
     eccentric_annulus,
     flat_mesh,
     plate_with_holes,
-    rings_with_bridge,
     sliver_disc,
 )
 
@@ -506,36 +505,6 @@ def test_a_disc_with_slits_is_no_band_and_gets_plain_contours() -> None:
     assert res.report["band_fit_dropped"] == 1 and res.report["band_fit_holes_filled"] == 0
     assert res.report["width_error"]["contour"]["p90"] < 0.1
     assert abs(res.report["layer_volume_error"]) < 0.01
-
-
-def test_stripe_layer_walls_get_their_centre_line(monkeypatch: pytest.MonkeyPatch) -> None:
-    """Two tube walls (about one W thick) joined by a solid bridge, on a stripe layer:
-    stripes across the walls are stubs joined by U-turns that lay half the ink, and the
-    volume match then spreads the bridge's stripes apart. With the walls printed along
-    their middle and stripes on the bridge only, the stripes keep their spacing (p50 47 ->
-    2 %, p90 54 -> 33 %), and the wall lines lie on the walls' middle."""
-    import slicer.toolpath.strategy as strategy
-
-    v, f = rings_with_bridge()
-    layers = flat_layer(v, f, 0.6)
-    # (full-width joins: narrow ones lay less ink on the stubs, and the stripes everywhere
-    # then keep their spacing about as well)
-    config = JobConfig().with_overrides(toolpath={"first_pattern": "stripe",
-                                                  "narrow_joins": False})
-    res = compute_toolpath(layers, config, PROFILE, measure_baselines=False, workers=1)
-    monkeypatch.setattr(strategy, "WALL_SHARE", 2.0)  # never: stripes everywhere
-    everywhere = compute_toolpath(layers, config, PROFILE, measure_baselines=False, workers=1)
-    assert [s["fallback"] for s in res.layer_stats] == [["walls"]]
-    assert [s["fallback"] for s in everywhere.layer_stats] == [[""]]
-    we, wa = res.report["width_error"]["stripe"], everywhere.report["width_error"]["stripe"]
-    assert we["p90"] < wa["p90"] and we["p50"] < 0.1 < wa["p50"]
-    assert res.report["connector_volume_fraction"] < everywhere.report["connector_volume_fraction"]
-    assert abs(res.report["layer_volume_error"]) < 0.01
-    tp = res.toolpath
-    outer = tp.extrude & (np.abs(tp.position[:, 0]) > 26.0 + 4.0)  # the walls' far sides
-    radius = np.hypot(np.abs(tp.position[outer, 0]) - 26.0, tp.position[outer, 1])
-    assert np.all(np.abs(radius - (14.0 - 1.2)) < 0.25)
-    assert np.all(tp.pattern[tp.extrude] == Pattern.STRIPE)
 
 
 def test_variable_height_on_a_curved_layer_is_deformed() -> None:

@@ -14,7 +14,7 @@ from slicer.toolpath.build import compute_toolpath
 from slicer.toolpath.coverage import layer_coverage
 from slicer.toolpath.geodesic import boundary_distance
 from slicer.toolpath.line_source import LineSource
-from slicer.toolpath.ridge_fit import band_across, ridge_fitted_lines
+from slicer.toolpath.ridge_fit import _first_peak, band_across, ridge_fitted_lines
 from slicer.toolpath.surface_geometry import SurfaceGeometry
 from slicer.toolpath.width_error import line_spacing
 from tests.slicer.toolpath.pattern_meshes import disc, plate_with_holes
@@ -139,3 +139,40 @@ def test_a_plate_with_holes_keeps_the_pitch_that_spaces_its_lines_better(
         blended = p90()
     assert blended < laid  # the fixture reproduces the case
     assert chosen <= blended + 1e-9
+
+
+CORNER_HOLES = ((-13.5, -8.0), (-13.5, 8.0), (13.5, -8.0), (13.5, 8.0))
+
+
+def test_a_ray_crosses_the_ridge_at_its_first_peak() -> None:
+    """The boundary distance along a ray rises to the ridge and falls into the next front
+    (a hole's, a wider body beyond a neck): the first peak, noise within ``drop`` aside."""
+    along = np.array([[1.0, 2.0, 3.0, 2.5, 5.0],  # crosses at 3, then a deeper body
+                      [1.0, 2.0, 1.95, 3.0, 3.5],  # a dip within the noise: no crossing
+                      [0.5, 1.0, 1.5, 2.0, 2.5]])  # never falls: its maximum
+    assert np.allclose(_first_peak(along, 0.1), [3.0, 3.5, 2.5])
+
+
+def test_a_body_beside_a_neck_keeps_its_width() -> None:
+    """A plate 38 x 25 mm with a small hole near each corner (a machined plate): the necks
+    between the holes and the rim are about 3 mm wide. The body beside them reads its own
+    width (the ray from the left rim crosses the ridge at half the plate's height), not
+    the neck's width plus the way from it, which left it too few lines."""
+    v, f = plate_with_holes(38.0, 25.0, 1.5, h=0.5, centres=CORNER_HOLES)
+    b = band_across(v, f, boundary_distance(v, f, backend="eikonal"))
+    body = (np.abs(v[:, 0] + 16.0) < 1.0) & (np.abs(v[:, 1]) < 2.0)
+    assert body.sum() > 5
+    assert np.all(b[body] > 20.0)
+
+
+def test_a_plate_with_holes_near_its_rim_is_covered() -> None:
+    """That plate printed as one contour layer: with the body's width read at the neck's
+    the rings from the rim and the holes stopped short of its middle, 21 % of the layer
+    bare and 15 % covered twice; now the rings fill it."""
+    v, f = plate_with_holes(38.0, 25.0, 1.5, h=0.5, centres=CORNER_HOLES)
+    layers = Layers(v, f, np.zeros(len(f), np.int32), np.full(len(v), 0.6),
+                    np.tile([0.0, 0.0, 1.0], (len(v), 1)))
+    res = compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False, workers=1)
+    cov = layer_coverage(layers, res.toolpath, max_samples=20_000)
+    assert cov.gap[0] < 0.11 and cov.overlap[0] < 0.09
+    assert abs(res.report["layer_volume_error"]) < 0.01
