@@ -1,4 +1,4 @@
-"""Repair of closed but non-manifold surfaces (``mesp slice --repair``) by fTetWild's wrap.
+"""Repair of non-manifold or open surfaces (``mesp slice --repair``) by fTetWild's wrap.
 
 A CAD export or a merged scan is often closed yet non-manifold: bodies touching along an
 edge, an internal face left between two parts, shells sharing a seam. ``load_surface``
@@ -10,7 +10,9 @@ The wrap is coarse (``EDGE_LENGTH_FAC``): only its boundary is used, and its acc
 envelope, not the edge length. Where parts of the wrap touch along an edge or at a point, the
 tet boundary is itself non-manifold there: the touching vertices are split into one copy per
 part (``split_pinches``), so the parts become separate closed shells. The wrapped surface then
-goes through ``load_surface``'s checks like any other, and one note says what changed.
+goes through ``load_surface``'s checks like any other, and one note says what changed. An
+open surface whose holes a fan cannot close (``slicer.repair``: a wall with a hole, sheets) is
+wrapped the same way: the winding number needs no closed input to tell inside from outside.
 """
 
 from __future__ import annotations
@@ -45,6 +47,8 @@ class Wrap:
 
     Attributes:
         non_manifold_edges: edges used by 3 or more faces in the input.
+        open_edges: edges used by one face in the input (fTetWild's winding number closes
+            them).
         faces_before: triangles of the input. faces_after: triangles of the wrap.
         volume_before: signed volume of the input, in file units cubed (the sum over its
             faces; counts overlapping shells twice).
@@ -54,6 +58,7 @@ class Wrap:
     """
 
     non_manifold_edges: int
+    open_edges: int
     faces_before: int
     faces_after: int
     volume_before: float
@@ -72,9 +77,19 @@ def boundary_faces(tets: np.ndarray) -> np.ndarray:
 
 def non_manifold_edges(faces: np.ndarray) -> int:
     """Edges of the (m, 3) ``faces`` used by 3 or more faces."""
+    return int(np.count_nonzero(_edge_uses(faces) > 2))
+
+
+def open_edges(faces: np.ndarray) -> int:
+    """Edges of the (m, 3) ``faces`` used by one face."""
+    return int(np.count_nonzero(_edge_uses(faces) == 1))
+
+
+def _edge_uses(faces: np.ndarray) -> np.ndarray:
+    """(e,) int64: how many of the (m, 3) ``faces`` use each undirected edge."""
     edges = np.sort(np.asarray(faces)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     _, uses = np.unique(edges, axis=0, return_counts=True)
-    return int(np.count_nonzero(uses > 2))
+    return uses
 
 
 def split_pinches(vertices: np.ndarray, faces: np.ndarray, offset: float
@@ -229,7 +244,7 @@ def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarra
     tets = np.asarray(tets, dtype=np.int64)
     if len(tets) == 0:
         return points[:0], np.zeros((0, 3), dtype=np.int64), Wrap(
-            non_manifold_edges(faces), len(faces), 0,
+            non_manifold_edges(faces), open_edges(faces), len(faces), 0,
             signed_volume(np.asarray(vertices, dtype=np.float64), faces), 0.0, 0)
     tets = orient_positive(points, tets)
     out_v, out_f = compact(points, boundary_faces(tets))
@@ -239,6 +254,7 @@ def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarra
         out_v, out_f = bisect_crowded(out_v, out_f)
         out_v, out_f, more = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
         pinches += more
-    return out_v, out_f, Wrap(non_manifold_edges(faces), len(faces), len(out_f),
+    return out_v, out_f, Wrap(non_manifold_edges(faces), open_edges(faces), len(faces),
+                              len(out_f),
                               signed_volume(np.asarray(vertices, dtype=np.float64), faces),
                               signed_volume(out_v, out_f), pinches)
