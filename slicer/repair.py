@@ -130,6 +130,7 @@ def load_repaired(path: str | Path, units: str | ModelConfig = "mm", wrap: bool 
     if isinstance(mesh, trimesh.Scene):
         mesh = mesh.to_geometry()
     mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    mesh.update_faces(mesh.unique_faces() & mesh.nondegenerate_faces())  # as load_surface
     return _REPAIRS[refusal.reason](path, units, mesh, wrap)
 
 
@@ -140,9 +141,7 @@ def _load_filled(path: Path, units: str | ModelConfig, mesh: trimesh.Trimesh,
     holes close them onto themselves, a polygon soup: no inside for a wrap to find)."""
     raw_v = np.asarray(mesh.vertices, dtype=np.float64)
     raw_f = np.asarray(mesh.faces)
-    mesh.update_faces(mesh.unique_faces() & mesh.nondegenerate_faces())
-    vertices, faces, fill = fill_holes(np.asarray(mesh.vertices, dtype=np.float64),
-                                       np.asarray(mesh.faces))
+    vertices, faces, fill = fill_holes(raw_v, raw_f)
     holes = f"filled {fill.holes} hole{'s' if fill.holes != 1 else ''}"
     try:
         surface = _load_as(path, units, vertices, faces, "the filled surface")
@@ -204,6 +203,9 @@ def _load_wrapped(path: Path, units: str | ModelConfig, vertices: np.ndarray,
     # an open input's signed volume means nothing: only the wrap's is said
     edges, before = ((f"{wrapped.open_edges} open and ", "") if wrapped.open_edges else
                      ("", f"{wrapped.volume_before * scale**3:.0f} -> "))
+    if wrapped.bodies_wrapped < wrapped.bodies:
+        edges = (f"{wrapped.bodies_wrapped} of {wrapped.bodies} bodies, the others kept as "
+                 f"they are; {edges}")
     line = (f"--repair: wrapped by fTetWild's winding-number test ({edges}"
             f"{wrapped.non_manifold_edges} non-manifold edges resolved, {wrapped.pinches} "
             f"touching vertices split, {wrapped.faces_before} -> {wrapped.faces_after} "

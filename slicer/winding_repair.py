@@ -55,6 +55,8 @@ class Wrap:
         volume_after: volume of the wrap, in file units cubed.
         pinches: vertices of the wrap where parts touch (along an edge or at a point),
             each split into one copy per part.
+        bodies: vertex-connected bodies of the input. bodies_wrapped: those given to
+            fTetWild (``slicer.body_wrap``: the others are kept as they are).
     """
 
     non_manifold_edges: int
@@ -64,6 +66,8 @@ class Wrap:
     volume_before: float
     volume_after: float
     pinches: int
+    bodies: int = 1
+    bodies_wrapped: int = 1
 
 
 def boundary_faces(tets: np.ndarray) -> np.ndarray:

@@ -24,11 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
+from slicer.body_wrap import wrap_troubled
 from slicer.tet_cache import cache_dir
-from slicer.winding_repair import Wrap, wrap
+from slicer.winding_repair import Wrap
 
 #: the code a stored wrap depends on (files of this package)
-WRAP_SOURCES = ("winding_repair.py", "tet_geometry.py", "solid_volume.py")
+WRAP_SOURCES = ("body_wrap.py", "winding_repair.py", "tet_geometry.py", "solid_volume.py")
 
 
 def wrap_key(vertices: np.ndarray, faces: np.ndarray) -> str:
@@ -75,7 +76,7 @@ def stored_wrap(vertices: np.ndarray, faces: np.ndarray
 
 def cached_wrap(vertices: np.ndarray, faces: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, Wrap]:
-    """``winding_repair.wrap`` of ``vertices`` (n, 3) float64 and ``faces`` (m, 3) int, read
+    """``body_wrap.wrap_troubled`` of ``vertices`` (n, 3) float64 and ``faces`` (m, 3) int, read
     back where this input was wrapped before, stored otherwise (also an empty wrap: the same
     input gets the same answer)."""
     folder = cache_dir()
@@ -84,7 +85,7 @@ def cached_wrap(vertices: np.ndarray, faces: np.ndarray
         found = load(folder, key)
         if found is not None:
             return found
-    out_v, out_f, summary = wrap(vertices, faces)
+    out_v, out_f, summary = wrap_troubled(vertices, faces)
     if folder is not None:
         store(folder, key, out_v, out_f, summary)
     return out_v, out_f, summary

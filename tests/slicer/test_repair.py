@@ -11,7 +11,7 @@ import trimesh
 
 from core.errors import InputError
 from mesp_cell.cli import main
-from slicer import repair, tet_cache, wrap_cache
+from slicer import tet_cache, wrap_cache
 from slicer.mesh_io import load_surface
 from slicer.repair import fill_holes, load_repaired, repair_offer, repairable
 from slicer.surface_refusal import SurfaceReason, SurfaceRefused
@@ -23,7 +23,6 @@ from slicer.winding_repair import (
     split_pinches,
     wrap,
 )
-
 
 # Seconds a test gives the check that --repair works (the host may be loaded; the 30 s the
 # refusal waits is the product's limit, not what these tests measure).
@@ -262,14 +261,14 @@ def test_an_open_surface_the_fill_cannot_close_is_wrapped(tmp_path: Path) -> Non
 def _counting_wrap(monkeypatch: pytest.MonkeyPatch) -> list[int]:
     """Count fTetWild's wraps made through the cache."""
     calls: list[int] = []
-    real = wrap_cache.wrap
+    real = wrap_cache.wrap_troubled
 
     def counted(vertices: np.ndarray, faces: np.ndarray
                 ) -> tuple[np.ndarray, np.ndarray, Wrap]:
         calls.append(len(faces))
         return real(vertices, faces)
 
-    monkeypatch.setattr(wrap_cache, "wrap", counted)
+    monkeypatch.setattr(wrap_cache, "wrap_troubled", counted)
     return calls
 
 
