@@ -6,7 +6,9 @@ vertices, filling holes that are small against the model (perimeter at most
 ``SMALL_HOLE_FRACTION`` of the bounding-box diagonal), making the winding consistent and, for
 a surface whose normals all point inwards (negative volume), flipping every face. Each
 repair is reported in ``Surface.notes``; a larger opening is refused, with the number of open
-edges, rather than guessed shut.
+edges, rather than guessed shut. A surface that does not bound a solid is refused with a
+``SurfaceRefused`` whose reason (``slicer.surface_refusal.SurfaceReason``) ``--repair``
+dispatches on.
 """
 
 from __future__ import annotations
