@@ -103,11 +103,12 @@ class WrapNotStored(Exception):
     """``load_repaired(..., wrap=False)`` needs a wrap that is not stored yet."""
 
 
-def load_repaired(path: str | Path, units: str | ModelConfig = "mm", wrap: bool = True
-                  ) -> Surface:
+def load_repaired(path: str | Path, units: str | ModelConfig = "mm", wrap: bool = True,
+                  reason: SurfaceReason | None = None) -> Surface:
     """``load_surface``, with the repair its refusal's reason calls for made first
     (module docstring). ``wrap=False``: only a stored wrap is used (raises ``WrapNotStored``
-    where fTetWild would have to run).
+    where fTetWild would have to run). ``reason``: the reason ``load_surface`` already
+    refused the file for (it is not read twice).
 
     A surface that loads as it is is returned as it is (a note says there was nothing to
     repair).
@@ -117,21 +118,22 @@ def load_repaired(path: str | Path, units: str | ModelConfig = "mm", wrap: bool 
             repaired surface is still refused.
     """
     path = Path(path)
-    try:
-        surface = load_surface(path, units)
-    except SurfaceRefused as exc:
-        if exc.reason not in _REPAIRS:
-            raise
-        refusal = exc
-    else:
-        return replace(surface, notes=(*surface.notes, "--repair: the surface is closed, "
-                                                       "nothing to repair"))
+    if reason is None:
+        try:
+            surface = load_surface(path, units)
+        except SurfaceRefused as exc:
+            if exc.reason not in _REPAIRS:
+                raise
+            reason = exc.reason
+        else:
+            return replace(surface, notes=(*surface.notes, "--repair: the surface is closed, "
+                                                           "nothing to repair"))
     mesh = trimesh.load_mesh(path, file_type=path.suffix.lower().lstrip("."), process=False)
     if isinstance(mesh, trimesh.Scene):
         mesh = mesh.to_geometry()
     mesh.merge_vertices(merge_tex=True, merge_norm=True)
     mesh.update_faces(mesh.unique_faces() & mesh.nondegenerate_faces())  # as load_surface
-    return _REPAIRS[refusal.reason](path, units, mesh, wrap)
+    return _REPAIRS[reason](path, units, mesh, wrap)
 
 
 def _load_filled(path: Path, units: str | ModelConfig, mesh: trimesh.Trimesh,
@@ -233,20 +235,22 @@ def repairable(refusal: InputError) -> bool:
     return isinstance(refusal, SurfaceRefused) and refusal.reason in _REPAIRS
 
 
-def repair_within(path: str | Path, units: str | ModelConfig, seconds: float
-                  ) -> Surface | InputError | None:
+def repair_within(path: str | Path, units: str | ModelConfig, seconds: float,
+                  reason: SurfaceReason | None = None) -> Surface | InputError | None:
     """What ``load_repaired`` gives (the surface, or its refusal), None where it takes
     over ``seconds``. A stored wrap is read here; a wrap to make runs in a child process
-    (killed after ``seconds``), which stores it for the runs that follow."""
+    (killed after ``seconds``), which stores it for the runs that follow. ``reason``: the
+    reason the file was refused for, where known."""
     try:
-        return load_repaired(path, units, wrap=False)
+        return load_repaired(path, units, wrap=False, reason=reason)
     except WrapNotStored:
         pass
     except InputError as exc:
         return exc
     context = multiprocessing.get_context("spawn")  # fork would inherit fTetWild's threads
     queue = context.Queue()
-    child = context.Process(target=_repair_child, args=(Path(path), units, queue), daemon=True)
+    child = context.Process(target=_repair_child, args=(Path(path), units, reason, queue),
+                            daemon=True)
     child.start()
     deadline = time.monotonic() + seconds
     answer: tuple[Any, ...] | None = None
@@ -271,10 +275,11 @@ def repair_within(path: str | Path, units: str | ModelConfig, seconds: float
     return Surface(vertices=vertices, faces=faces, source=Path(path), notes=notes)
 
 
-def _repair_child(path: Path, units: str | ModelConfig, queue: Any) -> None:
+def _repair_child(path: Path, units: str | ModelConfig, reason: SurfaceReason | None,
+                  queue: Any) -> None:
     """Child process: ``load_repaired``'s surface (arrays and notes) or its refusal."""
     try:
-        surface = load_repaired(path, units)
+        surface = load_repaired(path, units, reason=reason)
     except InputError as exc:
         queue.put(("refused", exc.problem, exc.fix))
     else:
@@ -290,7 +295,7 @@ def repair_offer(path: str | Path, units: str | ModelConfig, refusal: InputError
     repair answers its reason."""
     if not isinstance(refusal, SurfaceRefused) or refusal.reason not in _REPAIRS:
         return refusal
-    fix = offer_fix(refusal, repair_within(path, units, seconds), seconds)
+    fix = offer_fix(refusal, repair_within(path, units, seconds, refusal.reason), seconds)
     return SurfaceRefused(refusal.problem, fix, refusal.reason)
 
 

@@ -63,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     from slicer.extrusion import load_profile
     from slicer.mesh_io import Surface, load_surface
     from slicer.repair import offer_fix, repair_within, repairable
+    from slicer.surface_refusal import SurfaceRefused
     from slicer.toolpath.thin_features import THINNEST
 
     start = time.perf_counter()
@@ -87,9 +88,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         surface = load_surface(args.model, units)
     except InputError as exc:
-        if not repairable(exc):
+        if not isinstance(exc, SurfaceRefused) or not repairable(exc):
             raise
-        outcome = repair_within(args.model, units, REPAIR_SECONDS)
+        outcome = repair_within(args.model, units, REPAIR_SECONDS, exc.reason)
         fix = offer_fix(exc, outcome, REPAIR_SECONDS, "slice with --repair")
         if not isinstance(outcome, Surface):  # the rest needs a surface that loads
             raise InputError(exc.problem, fix) from exc
