@@ -36,6 +36,9 @@ STOP_ENERGY = 100.0
 # Copies of a vertex where parts of the wrap touch are moved apart by this fraction of the
 # bounding-box diagonal (far above the merge tolerance, far below the envelope).
 SPLIT_OFFSET_FAC = 1e-5
+# Rounds of bisecting crowded edges (one edge per face each round) before the wrap is left
+# as it is and ``load_surface`` judges it.
+BISECT_ROUNDS = 4
 
 # The outward faces of a positively oriented tet: face k is opposite vertex k.
 _TET_FACES = np.array([(1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)])
@@ -192,9 +195,11 @@ def _radial_pairs(vertices: np.ndarray, faces: np.ndarray, directed: np.ndarray,
 
 
 def bisect_crowded(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Split every edge of 3 or more faces at its midpoint (each of its faces into two), where
-    none of those faces has another such edge; ``split_pinches`` then parts the midpoint where
-    both ends of the edge are shared by the touching parts.
+    """Split edges of 3 or more faces at their midpoints (each of their faces into two), at
+    most one edge per face: of a face's crowded edges only the lowest-numbered is a candidate,
+    and an edge is split where it is the candidate of all its faces (the lowest crowded edge
+    always is, so repeated calls split them all); ``split_pinches`` then parts the midpoint
+    where both ends of the edge are shared by the touching parts.
 
     Args:
         vertices: (n, 3) float64. faces: (m, 3) int.
@@ -208,9 +213,9 @@ def bisect_crowded(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
                                  return_counts=True)
     edge_id = edge_id.ravel()
     crowded = uses[edge_id] > 2  # (3m,) per half-edge
-    per_face = crowded.reshape(-1, 3).sum(axis=1)
+    lowest = np.where(crowded, edge_id, len(uses)).reshape(-1, 3).min(axis=1)  # (m,) per face
     blocked = np.zeros(len(uses), dtype=bool)
-    blocked[edge_id[crowded & np.repeat(per_face > 1, 3)]] = True
+    blocked[edge_id[crowded & (np.repeat(lowest, 3) != edge_id)]] = True
     chosen = np.flatnonzero(crowded & ~blocked[edge_id])
     if not len(chosen):
         return np.asarray(vertices, dtype=np.float64), faces
@@ -254,7 +259,9 @@ def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarra
     out_v, out_f = compact(points, boundary_faces(tets))
     diagonal = float(np.linalg.norm(np.ptp(out_v, axis=0)))
     out_v, out_f, pinches = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
-    if non_manifold_edges(out_f):  # touching along an edge whose ends the parts share
+    for _ in range(BISECT_ROUNDS):  # touching along an edge whose ends the parts share
+        if not non_manifold_edges(out_f):
+            break
         out_v, out_f = bisect_crowded(out_v, out_f)
         out_v, out_f, more = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
         pinches += more

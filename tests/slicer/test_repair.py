@@ -310,3 +310,32 @@ def test_the_offer_checks_wrap_is_the_one_repair_uses(tmp_path: Path,
     surface = load_repaired(path)
     assert calls == []  # read back, not wrapped again
     assert f"(checked: it {surface.notes[0].removeprefix('--repair: ')})" in offer.fix
+
+
+def test_a_face_with_two_crowded_edges_gets_both_split_in_two_rounds() -> None:
+    """Cube A with cubes touching two of its top edges: a face of A holds both crowded
+    edges; each round splits one of them (the lowest), so neither stays blocked."""
+    def cube(at: tuple[float, float, float]) -> trimesh.Trimesh:
+        box = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+        box.apply_translation(at)
+        return box
+
+    both = cube((0.0, 0.0, 0.0)) + cube((10.0, 0.0, 10.0)) + cube((0.0, 10.0, 10.0))
+    both.merge_vertices()
+    v, f = np.asarray(both.vertices, dtype=np.float64), np.asarray(both.faces)
+    uses = {}
+    for a, b in np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1):
+        uses[(a, b)] = uses.get((a, b), 0) + 1
+    face = next(t for t in f if sum(uses[tuple(sorted((t[k], t[(k + 1) % 3])))] > 2
+                                    for k in range(3)) == 2)
+    crowded = [tuple(sorted((face[k], face[(k + 1) % 3]))) for k in range(3)
+               if uses[tuple(sorted((face[k], face[(k + 1) % 3])))] > 2]
+    mids = [0.5 * (v[a] + v[b]) for a, b in crowded]
+
+    def split_at(points: np.ndarray) -> list[bool]:
+        return [bool(np.any(np.linalg.norm(points - m, axis=1) < 1e-9)) for m in mids]
+
+    v1, f1 = bisect_crowded(v, f)
+    assert sorted(split_at(v1)) == [False, True]  # one per face and round
+    v2, _ = bisect_crowded(v1, f1)
+    assert split_at(v2) == [True, True]
