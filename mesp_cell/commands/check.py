@@ -62,7 +62,8 @@ def run(args: argparse.Namespace) -> int:
     from slicer.config import load_job
     from slicer.extrusion import load_profile
     from slicer.mesh_io import Surface, load_surface
-    from slicer.repair import offer_fix, repair_within, repairable
+    from slicer.repair import repairable
+    from slicer.repair_offer import offer_fix, repair_within
     from slicer.surface_refusal import SurfaceRefused
     from slicer.toolpath.thin_features import THINNEST
 

@@ -146,7 +146,8 @@ def run(args: argparse.Namespace) -> int:
     except ThinWallsError as exc:
         raise exc.with_cell(_too_big(cell, exc.bbox_mm)) from exc
     except InputError as exc:
-        from slicer.repair import repair_offer, repairable
+        from slicer.repair import repairable
+        from slicer.repair_offer import repair_offer
 
         if args.repair or not repairable(exc):
             raise

@@ -13,7 +13,8 @@ from core.errors import InputError
 from mesp_cell.cli import main
 from slicer import tet_cache, wrap_cache
 from slicer.mesh_io import load_surface
-from slicer.repair import fill_holes, load_repaired, repair_offer, repairable
+from slicer.repair import fill_holes, load_repaired, repairable
+from slicer.repair_offer import repair_offer
 from slicer.surface_refusal import SurfaceReason, SurfaceRefused
 from slicer.winding_repair import (
     Wrap,
