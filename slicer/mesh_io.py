@@ -6,7 +6,9 @@ vertices, filling holes that are small against the model (perimeter at most
 ``SMALL_HOLE_FRACTION`` of the bounding-box diagonal), making the winding consistent and, for
 a surface whose normals all point inwards (negative volume), flipping every face. Each
 repair is reported in ``Surface.notes``; a larger opening is refused, with the number of open
-edges, rather than guessed shut.
+edges, rather than guessed shut. A surface that does not bound a solid is refused with a
+``SurfaceRefused`` whose reason (``slicer.surface_refusal.SurfaceReason``) ``--repair``
+dispatches on.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from core.stages import TetMesh
 from core.tolerance import tol
 from slicer.config import UNIT_SCALE_MM, ModelConfig
 from slicer.solid_volume import solid_volume
+from slicer.surface_refusal import SurfaceReason, SurfaceRefused
 from slicer.tet_geometry import compact, orient_positive, tet_volumes
 
 SURFACE_SUFFIXES = (".stl", ".obj", ".ply")
@@ -91,7 +94,8 @@ class Surface:
         return trimesh.Trimesh(self.vertices.copy(), self.faces.copy(), process=False)
 
 
-def _model_config(units: str | ModelConfig) -> ModelConfig:
+def model_config(units: str | ModelConfig) -> ModelConfig:
+    """``units`` as a ``ModelConfig`` (a unit name gets the default size range)."""
     if isinstance(units, ModelConfig):
         return units
     if units not in UNIT_SCALE_MM:
@@ -267,7 +271,8 @@ def _repair(mesh: trimesh.Trimesh, name: str, notes: list[str]) -> trimesh.Trime
     if len(mesh.faces) < faces_before:
         notes.append(f"removed {faces_before - len(mesh.faces)} duplicate or degenerate faces")
     if len(mesh.faces) == 0:
-        raise InputError(f"{name} has only degenerate triangles", "export the model again")
+        raise SurfaceRefused(f"{name} has only degenerate triangles", "export the model again",
+                             SurfaceReason.DEGENERATE)
     diagonal = float(np.linalg.norm(mesh.extents))
     open_edges, perimeters = _boundary_loops(mesh)
     if open_edges and perimeters.max() <= SMALL_HOLE_FRACTION * diagonal:
@@ -279,15 +284,16 @@ def _repair(mesh: trimesh.Trimesh, name: str, notes: list[str]) -> trimesh.Trime
         non_manifold = len(mesh.edges_unique) - len(shared) - open_edges
         detail = f"{open_edges} open edges" if open_edges else f"{non_manifold} non-manifold edges"
         largest = f", largest hole {perimeters.max():.1f} mm round" if len(perimeters) else ""
-        raise InputError(
+        raise SurfaceRefused(
             f"{name} is not watertight ({detail}{largest})",
             "close the surface in a mesh editor (e.g. Blender 3D-Print Toolbox, Meshmixer)",
+            SurfaceReason.OPEN if open_edges else SurfaceReason.NON_MANIFOLD,
         )
     flip, orientable = _consistent_winding(mesh.faces)
     if not orientable:
-        raise InputError(
+        raise SurfaceRefused(
             f"{name} cannot be oriented consistently (non-orientable or self-overlapping)",
-            "repair the surface in a mesh editor",
+            "repair the surface in a mesh editor", SurfaceReason.NON_ORIENTABLE,
         )
     if flip.any():
         faces = mesh.faces.copy()
@@ -311,7 +317,7 @@ def load_surface(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
             note says so (STL exporters get this wrong; the solid is unambiguous).
     """
     path = Path(path)
-    config = _model_config(units)
+    config = model_config(units)
     _check_file(path, SURFACE_SUFFIXES, "surface mesh")
     mesh = _read_trimesh(path)
     name = path.name
@@ -334,9 +340,9 @@ def load_surface(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
     tri = mesh.vertices[mesh.faces]
     volume = float(np.einsum("ij,ij->i", tri[:, 0], np.cross(tri[:, 1], tri[:, 2])).sum() / 6)
     if abs(volume) <= FLAT_VOLUME_FRACTION * diagonal**3:
-        raise InputError(
+        raise SurfaceRefused(
             f"{name} encloses no volume ({volume:.3g} mm^3): it is flat or doubled-up",
-            "give a solid model (a closed surface around a volume)",
+            "give a solid model (a closed surface around a volume)", SurfaceReason.FLAT,
         )
     if volume < 0:
         mesh.invert()
@@ -390,7 +396,7 @@ def load_tet_mesh(path: str | Path, units: str | ModelConfig = "mm") -> TetMesh:
     import meshio
 
     path = Path(path)
-    config = _model_config(units)
+    config = model_config(units)
     _check_file(path, TET_SUFFIXES, "tet mesh")
     said = io.StringIO()  # meshio prints its complaint to stderr, then calls sys.exit(1)
     try:

@@ -46,8 +46,8 @@ def slice_model(
     """Slice ``model`` into ``out_dir``; returns the report written to ``report.json``.
 
     ``alpha`` is the printing-angle range of the cell the job is for (None: the bundled cell's);
-    the toolpath's step limits follow from it. ``repair``: close every hole of an open surface
-    first (``slicer.repair``).
+    the toolpath's step limits follow from it. ``repair``: close an open surface or wrap a
+    non-manifold one first (``slicer.repair``).
     """
     from slicer import mesh_io, tetrahedralize
 

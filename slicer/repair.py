@@ -1,5 +1,5 @@
-"""Repair on request (``mesp slice --repair``): every hole closed, or a non-manifold surface
-wrapped (``slicer.winding_repair``), and said so.
+"""Repair on request (``mesp slice --repair``): every hole closed, or the surface wrapped
+(``slicer.winding_repair``), and said so.
 
 ``mesh_io.load_surface`` fills only cracks (holes small against the model) and refuses a real
 opening rather than guess it shut. A scan or a CT segmentation is often open where the scanner
@@ -9,16 +9,21 @@ closed by a fan of triangles around the loop's centroid, wound like its neighbou
 closed surface then goes through ``load_surface``'s checks (size, winding, volume) like any
 other. What changed (holes, open edges, area added, the largest hole) is one line in the
 surface's notes, so the report and the command say it.
+
+The repair is picked by the refusal's reason (``SurfaceRefused.reason``): an open surface is
+filled, and where the filled surface is still refused (open sheets, a wall with a hole) it is
+wrapped by fTetWild's winding-number test, which handles open surfaces; a closed,
+non-manifold surface is wrapped. Wraps are kept per input (``slicer.wrap_cache``), so a
+repeated run, or the ``--repair`` run after the check that offered it, gets the same surface.
+Whether ``--repair`` is offered, and checked, is ``slicer.repair_offer``.
 """
 
 from __future__ import annotations
 
-import multiprocessing
-import queue as queue_module
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import trimesh
@@ -27,11 +32,10 @@ from core.errors import InputError
 from core.tolerance import tol
 from slicer.config import ModelConfig
 from slicer.mesh_io import Surface, load_surface
-from slicer.winding_repair import wrap
+from slicer.surface_refusal import SurfaceReason, SurfaceRefused
+from slicer.wrap_cache import cached_wrap, stored_wrap
 
-# Seconds the refusal of a non-manifold surface waits for the check that --repair works.
-OFFER_SECONDS = 30.0
-_TIMED_OUT = "timed out"
+_EDITOR = "close it in a mesh editor (e.g. Blender 3D-Print Toolbox, Meshmixer)"
 
 
 @dataclass(frozen=True)
@@ -88,63 +92,82 @@ def fill_holes(vertices: np.ndarray, faces: np.ndarray
         len(count), len(boundary), float(area.sum()), float(perimeter.max()))
 
 
-def _repairable(refusal: InputError) -> str | None:
-    """Which repair answers ``load_surface``'s refusal: "open" (holes), "non-manifold"
-    (closed, with edges of 3 or more faces), or None (another cause)."""
-    if "not watertight" not in refusal.problem:
-        return None
-    if "open edges" in refusal.problem:
-        return "open"
-    return "non-manifold" if "non-manifold edges" in refusal.problem else None
+class WrapNotStored(Exception):
+    """``load_repaired(..., wrap=False)`` needs a wrap that is not stored yet."""
 
 
-def load_repaired(path: str | Path, units: str | ModelConfig = "mm") -> Surface:
-    """``load_surface``, with every hole closed first where the surface is open, or wrapped by
-    fTetWild (``slicer.winding_repair``) where it is closed but non-manifold.
+def load_repaired(path: str | Path, units: str | ModelConfig = "mm", wrap: bool = True,
+                  reason: SurfaceReason | None = None) -> Surface:
+    """``load_surface``, with the repair its refusal's reason calls for made first
+    (module docstring). ``wrap=False``: only a stored wrap is used (raises ``WrapNotStored``
+    where fTetWild would have to run). ``reason``: the reason ``load_surface`` already
+    refused the file for (it is not read twice).
 
     A surface that loads as it is is returned as it is (a note says there was nothing to
     repair).
 
     Raises:
-        InputError: what ``load_surface`` raises for another reason, or the repaired surface
-            is still refused (overlapping sheets, edges shared by 3 faces after the fill).
+        InputError: what ``load_surface`` raises for a reason no repair answers, or the
+            repaired surface is still refused.
     """
     path = Path(path)
-    try:
-        surface = load_surface(path, units)
-    except InputError as exc:
-        kind = _repairable(exc)
-        if kind is None:
-            raise
-    else:
-        return replace(surface, notes=(*surface.notes, "--repair: the surface is closed, "
-                                                       "nothing to repair"))
+    if reason is None:
+        try:
+            surface = load_surface(path, units)
+        except SurfaceRefused as exc:
+            if exc.reason not in _REPAIRS:
+                raise
+            reason = exc.reason
+        else:
+            return replace(surface, notes=(*surface.notes, "--repair: the surface is closed, "
+                                                           "nothing to repair"))
     mesh = trimesh.load_mesh(path, file_type=path.suffix.lower().lstrip("."), process=False)
     if isinstance(mesh, trimesh.Scene):
         mesh = mesh.to_geometry()
     mesh.merge_vertices(merge_tex=True, merge_norm=True)
-    if kind == "non-manifold":
-        return _load_wrapped(path, units, mesh)
-    mesh.update_faces(mesh.unique_faces() & mesh.nondegenerate_faces())
-    vertices, faces, fill = fill_holes(np.asarray(mesh.vertices, dtype=np.float64),
-                                       np.asarray(mesh.faces))
+    mesh.update_faces(mesh.unique_faces() & mesh.nondegenerate_faces())  # as load_surface
+    return _REPAIRS[reason](path, units, mesh, wrap)
+
+
+def _load_filled(path: Path, units: str | ModelConfig, mesh: trimesh.Trimesh,
+                 wrap: bool) -> Surface:
+    """``load_surface`` on ``mesh`` with every hole closed; where that is still refused, on
+    fTetWild's wrap of ``mesh``, unless the filled surface encloses nothing (sheets whose
+    holes close them onto themselves, a polygon soup: no inside for a wrap to find)."""
+    raw_v = np.asarray(mesh.vertices, dtype=np.float64)
+    raw_f = np.asarray(mesh.faces)
+    vertices, faces, fill = fill_holes(raw_v, raw_f)
+    holes = f"filled {fill.holes} hole{'s' if fill.holes != 1 else ''}"
+    try:
+        surface = _load_as(path, units, vertices, faces, "the filled surface")
+    except SurfaceRefused as exc:
+        if exc.reason is SurfaceReason.FLAT:  # sheets closed on themselves: no inside to find
+            raise InputError(f"{path.name} is still refused after --repair {holes} "
+                             f"({exc.problem})", f"its faces enclose nothing (open sheets, a "
+                             f"polygon soup): {_EDITOR}") from exc
+        return _load_wrapped(path, units, raw_v, raw_f, wrap, f"{holes} ({exc.problem}) and ")
+    scale = _scale(surface, vertices)
+    line = (f"--repair: filled {fill.holes} hole{'s' if fill.holes != 1 else ''} "
+            f"({fill.open_edges} open edges, largest {fill.largest_perimeter * scale:.1f} mm "
+            f"round), added {fill.area_added * scale**2:.0f} mm^2 of surface")
+    return replace(surface, notes=(line, *surface.notes))
+
+
+def _load_as(path: Path, units: str | ModelConfig, vertices: np.ndarray, faces: np.ndarray,
+             what: str) -> Surface:
+    """``load_surface`` on a repaired surface (file units), its source ``path``; a refusal
+    names it ``what``."""
     with tempfile.TemporaryDirectory(prefix="mesp-repair-") as scratch:
         closed = Path(scratch) / f"{path.stem}.ply"
         trimesh.Trimesh(vertices, faces, process=False).export(closed)
         try:
             surface = load_surface(closed, units)
+        except SurfaceRefused as exc:
+            raise SurfaceRefused(exc.problem.replace(closed.name, what), exc.fix,
+                                 exc.reason) from exc
         except InputError as exc:
-            raise InputError(
-                f"{path.name} stays open after --repair filled {fill.holes} holes "
-                f"({exc.problem.replace(closed.name, 'the filled surface')})",
-                "its surface is not a set of clean holes (edges shared by 3 faces, or "
-                "overlapping sheets): close it in a mesh editor (e.g. Blender 3D-Print "
-                "Toolbox, Meshmixer)") from exc
-    scale = _scale(surface, vertices)
-    line = (f"--repair: filled {fill.holes} hole{'s' if fill.holes != 1 else ''} "
-            f"({fill.open_edges} open edges, largest {fill.largest_perimeter * scale:.1f} mm "
-            f"round), added {fill.area_added * scale**2:.0f} mm^2 of surface")
-    return replace(surface, source=path, notes=(line, *surface.notes))
+            raise InputError(exc.problem.replace(closed.name, what), exc.fix) from exc
+    return replace(surface, source=path)
 
 
 def _scale(surface: Surface, vertices: np.ndarray) -> float:
@@ -153,82 +176,53 @@ def _scale(surface: Surface, vertices: np.ndarray) -> float:
             / max(float(np.ptp(vertices, axis=0).max()), tol.tiny))
 
 
-def _load_wrapped(path: Path, units: str | ModelConfig, mesh: trimesh.Trimesh) -> Surface:
-    """``load_surface`` on fTetWild's wrap of the closed, non-manifold ``mesh``."""
-    vertices, faces, wrapped = wrap(np.asarray(mesh.vertices, dtype=np.float64),
-                                    np.asarray(mesh.faces))
+def _load_wrapped(path: Path, units: str | ModelConfig, vertices: np.ndarray,
+                  faces: np.ndarray, wrap: bool, tried: str = "") -> Surface:
+    """``load_surface`` on fTetWild's wrap of ``vertices`` (n, 3) float64 and ``faces``
+    (m, 3) int (file units, merged); ``tried``: what was tried before, for a refusal."""
+    stored = cached_wrap(vertices, faces) if wrap else stored_wrap(vertices, faces)
+    if stored is None:
+        raise WrapNotStored(path.name)
+    out_v, out_f, wrapped = stored
     fix = ("its surface does not bound a solid fTetWild can find (overlapping or open "
-           "sheets): close it in a mesh editor (e.g. Blender 3D-Print Toolbox, Meshmixer)")
-    if not len(faces):
-        raise InputError(f"{path.name}: fTetWild's winding-number test finds no inside "
-                         "(--repair)", fix)
-    with tempfile.TemporaryDirectory(prefix="mesp-repair-") as scratch:
-        closed = Path(scratch) / f"{path.stem}.ply"
-        trimesh.Trimesh(vertices, faces, process=False).export(closed)
-        try:
-            surface = load_surface(closed, units)
-        except InputError as exc:
-            raise InputError(
-                f"{path.name} is still refused after --repair wrapped it with fTetWild "
-                f"({exc.problem.replace(closed.name, 'the wrapped surface')})", fix) from exc
-    scale = _scale(surface, vertices)
-    line = (f"--repair: wrapped by fTetWild's winding-number test ({wrapped.non_manifold_edges} "
-            f"non-manifold edges resolved, {wrapped.pinches} touching vertices split, "
-            f"{wrapped.faces_before} -> {wrapped.faces_after} "
-            f"faces, volume {wrapped.volume_before * scale**3:.0f} -> "
-            f"{surface.volume_mm3:.0f} mm^3)")
-    return replace(surface, source=path, notes=(line, *surface.notes))
-
-
-def repair_offer(path: str | Path, units: str | ModelConfig, refusal: InputError
-                 ) -> InputError:
-    """The refusal of an open or non-manifold surface with ``--repair`` as its fix where the
-    repair was tried here and works; ``refusal`` unchanged otherwise.
-
-    A non-manifold surface is wrapped in a child process given ``OFFER_SECONDS`` (fTetWild's
-    time grows with the input's faces); past that the refusal says ``--repair`` was not
-    checked, beside its fix."""
-    kind = _repairable(refusal)
-    if kind is None:
-        return refusal
-    if kind == "open":
-        try:
-            what = load_repaired(path, units).notes[0]
-        except InputError:
-            return refusal
-    else:
-        checked = _wrap_within(Path(path), units, OFFER_SECONDS)
-        if checked is None:
-            return refusal
-        what = checked
-        if what == _TIMED_OUT:
-            return InputError(refusal.problem, f"{refusal.fix}; or try --repair (fTetWild's "
-                              f"wrap: not checked here, it takes over {OFFER_SECONDS:.0f} s "
-                              "on this mesh)")
-    return InputError(refusal.problem,
-                      f"re-run with --repair (checked: it {what.removeprefix('--repair: ')})")
-
-
-def _wrap_note(path: Path, units: str | ModelConfig, queue: Any) -> None:
-    """Child process: ``load_repaired``'s first note, or None where it is refused."""
+           f"sheets): {_EDITOR}")
+    if not len(out_f):
+        raise InputError(f"{path.name} is still refused after --repair {tried}wrapped it: "
+                         "fTetWild's winding-number test finds no inside", fix)
     try:
-        queue.put(load_repaired(path, units).notes[0])
-    except InputError:
-        queue.put(None)
+        surface = _load_as(path, units, out_v, out_f, "the wrapped surface")
+    except InputError as exc:
+        raise InputError(f"{path.name} is still refused after --repair {tried}wrapped it "
+                         f"with fTetWild ({exc.problem})", fix) from exc
+    scale = _scale(surface, out_v)
+    # an open input's signed volume means nothing: only the wrap's is said
+    edges, before = ((f"{wrapped.open_edges} open and ", "") if wrapped.open_edges else
+                     ("", f"{wrapped.volume_before * scale**3:.0f} -> "))
+    if wrapped.bodies_wrapped < wrapped.bodies:
+        edges = (f"{wrapped.bodies_wrapped} of {wrapped.bodies} bodies, the others kept as "
+                 f"they are; {edges}")
+    line = (f"--repair: wrapped by fTetWild's winding-number test ({edges}"
+            f"{wrapped.non_manifold_edges} non-manifold edges resolved, {wrapped.pinches} "
+            f"touching vertices split, {wrapped.faces_before} -> {wrapped.faces_after} "
+            f"faces, volume {before}{surface.volume_mm3:.0f} mm^3)")
+    return replace(surface, notes=(line, *surface.notes))
 
 
-def _wrap_within(path: Path, units: str | ModelConfig, seconds: float) -> str | None:
-    """``load_repaired``'s first note (None: refused), or ``_TIMED_OUT`` after ``seconds``."""
-    context = multiprocessing.get_context("spawn")  # fork would inherit fTetWild's threads
-    queue = context.Queue()
-    child = context.Process(target=_wrap_note, args=(path, units, queue), daemon=True)
-    child.start()
-    try:
-        note: str | None = queue.get(timeout=seconds)
-    except queue_module.Empty:
-        note = _TIMED_OUT
-    finally:
-        if child.is_alive():
-            child.kill()
-        child.join()
-    return note
+def _load_wrapped_mesh(path: Path, units: str | ModelConfig, mesh: trimesh.Trimesh,
+                       wrap: bool) -> Surface:
+    """``_load_wrapped`` on the merged ``mesh`` as read."""
+    return _load_wrapped(path, units, np.asarray(mesh.vertices, dtype=np.float64),
+                         np.asarray(mesh.faces), wrap)
+
+
+#: the repair each repairable reason calls for
+_REPAIRS: dict[SurfaceReason, Callable[[Path, str | ModelConfig, trimesh.Trimesh, bool],
+                                       Surface]] = {
+    SurfaceReason.OPEN: _load_filled,
+    SurfaceReason.NON_MANIFOLD: _load_wrapped_mesh,
+}
+
+
+def repairable(refusal: InputError) -> bool:
+    """Whether ``--repair`` has a repair for ``refusal`` (by its reason)."""
+    return isinstance(refusal, SurfaceRefused) and refusal.reason in _REPAIRS

@@ -1,4 +1,4 @@
-"""Repair of closed but non-manifold surfaces (``mesp slice --repair``) by fTetWild's wrap.
+"""Repair of non-manifold or open surfaces (``mesp slice --repair``) by fTetWild's wrap.
 
 A CAD export or a merged scan is often closed yet non-manifold: bodies touching along an
 edge, an internal face left between two parts, shells sharing a seam. ``load_surface``
@@ -10,7 +10,9 @@ The wrap is coarse (``EDGE_LENGTH_FAC``): only its boundary is used, and its acc
 envelope, not the edge length. Where parts of the wrap touch along an edge or at a point, the
 tet boundary is itself non-manifold there: the touching vertices are split into one copy per
 part (``split_pinches``), so the parts become separate closed shells. The wrapped surface then
-goes through ``load_surface``'s checks like any other, and one note says what changed.
+goes through ``load_surface``'s checks like any other, and one note says what changed. An
+open surface whose holes a fan cannot close (``slicer.repair``: a wall with a hole, sheets) is
+wrapped the same way: the winding number needs no closed input to tell inside from outside.
 """
 
 from __future__ import annotations
@@ -34,6 +36,9 @@ STOP_ENERGY = 100.0
 # Copies of a vertex where parts of the wrap touch are moved apart by this fraction of the
 # bounding-box diagonal (far above the merge tolerance, far below the envelope).
 SPLIT_OFFSET_FAC = 1e-5
+# Rounds of bisecting crowded edges (one edge per face each round) before the wrap is left
+# as it is and ``load_surface`` judges it.
+BISECT_ROUNDS = 4
 
 # The outward faces of a positively oriented tet: face k is opposite vertex k.
 _TET_FACES = np.array([(1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)])
@@ -45,20 +50,27 @@ class Wrap:
 
     Attributes:
         non_manifold_edges: edges used by 3 or more faces in the input.
+        open_edges: edges used by one face in the input (fTetWild's winding number closes
+            them).
         faces_before: triangles of the input. faces_after: triangles of the wrap.
         volume_before: signed volume of the input, in file units cubed (the sum over its
             faces; counts overlapping shells twice).
         volume_after: volume of the wrap, in file units cubed.
         pinches: vertices of the wrap where parts touch (along an edge or at a point),
             each split into one copy per part.
+        bodies: vertex-connected bodies of the input. bodies_wrapped: those given to
+            fTetWild (``slicer.body_wrap``: the others are kept as they are).
     """
 
     non_manifold_edges: int
+    open_edges: int
     faces_before: int
     faces_after: int
     volume_before: float
     volume_after: float
     pinches: int
+    bodies: int = 1
+    bodies_wrapped: int = 1
 
 
 def boundary_faces(tets: np.ndarray) -> np.ndarray:
@@ -72,9 +84,19 @@ def boundary_faces(tets: np.ndarray) -> np.ndarray:
 
 def non_manifold_edges(faces: np.ndarray) -> int:
     """Edges of the (m, 3) ``faces`` used by 3 or more faces."""
+    return int(np.count_nonzero(_edge_uses(faces) > 2))
+
+
+def open_edges(faces: np.ndarray) -> int:
+    """Edges of the (m, 3) ``faces`` used by one face."""
+    return int(np.count_nonzero(_edge_uses(faces) == 1))
+
+
+def _edge_uses(faces: np.ndarray) -> np.ndarray:
+    """(e,) int64: how many of the (m, 3) ``faces`` use each undirected edge."""
     edges = np.sort(np.asarray(faces)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
     _, uses = np.unique(edges, axis=0, return_counts=True)
-    return int(np.count_nonzero(uses > 2))
+    return uses
 
 
 def split_pinches(vertices: np.ndarray, faces: np.ndarray, offset: float
@@ -173,9 +195,11 @@ def _radial_pairs(vertices: np.ndarray, faces: np.ndarray, directed: np.ndarray,
 
 
 def bisect_crowded(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Split every edge of 3 or more faces at its midpoint (each of its faces into two), where
-    none of those faces has another such edge; ``split_pinches`` then parts the midpoint where
-    both ends of the edge are shared by the touching parts.
+    """Split edges of 3 or more faces at their midpoints (each of their faces into two), at
+    most one edge per face: of a face's crowded edges only the lowest-numbered is a candidate,
+    and an edge is split where it is the candidate of all its faces (the lowest crowded edge
+    always is, so repeated calls split them all); ``split_pinches`` then parts the midpoint
+    where both ends of the edge are shared by the touching parts.
 
     Args:
         vertices: (n, 3) float64. faces: (m, 3) int.
@@ -189,9 +213,9 @@ def bisect_crowded(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
                                  return_counts=True)
     edge_id = edge_id.ravel()
     crowded = uses[edge_id] > 2  # (3m,) per half-edge
-    per_face = crowded.reshape(-1, 3).sum(axis=1)
+    lowest = np.where(crowded, edge_id, len(uses)).reshape(-1, 3).min(axis=1)  # (m,) per face
     blocked = np.zeros(len(uses), dtype=bool)
-    blocked[edge_id[crowded & np.repeat(per_face > 1, 3)]] = True
+    blocked[edge_id[crowded & (np.repeat(lowest, 3) != edge_id)]] = True
     chosen = np.flatnonzero(crowded & ~blocked[edge_id])
     if not len(chosen):
         return np.asarray(vertices, dtype=np.float64), faces
@@ -229,16 +253,19 @@ def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarra
     tets = np.asarray(tets, dtype=np.int64)
     if len(tets) == 0:
         return points[:0], np.zeros((0, 3), dtype=np.int64), Wrap(
-            non_manifold_edges(faces), len(faces), 0,
+            non_manifold_edges(faces), open_edges(faces), len(faces), 0,
             signed_volume(np.asarray(vertices, dtype=np.float64), faces), 0.0, 0)
     tets = orient_positive(points, tets)
     out_v, out_f = compact(points, boundary_faces(tets))
     diagonal = float(np.linalg.norm(np.ptp(out_v, axis=0)))
     out_v, out_f, pinches = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
-    if non_manifold_edges(out_f):  # touching along an edge whose ends the parts share
+    for _ in range(BISECT_ROUNDS):  # touching along an edge whose ends the parts share
+        if not non_manifold_edges(out_f):
+            break
         out_v, out_f = bisect_crowded(out_v, out_f)
         out_v, out_f, more = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
         pinches += more
-    return out_v, out_f, Wrap(non_manifold_edges(faces), len(faces), len(out_f),
+    return out_v, out_f, Wrap(non_manifold_edges(faces), open_edges(faces), len(faces),
+                              len(out_f),
                               signed_volume(np.asarray(vertices, dtype=np.float64), faces),
                               signed_volume(out_v, out_f), pinches)

@@ -11,14 +11,20 @@ from typing import Any
 
 from core.errors import InputError
 
+# Of the seconds `mesp check` answers in, those the check that --repair works may take (a
+# stored wrap is read at once; fTetWild's time grows with the input's faces).
+REPAIR_SECONDS = 10.0
+
 HELP = """\
 Preflight a model in seconds, without tetrahedralising or slicing it: whether it fits the
 cell (footprint in the tank, height under the gel, the arm's reach with the nozzle vertical),
 whether its units look wrong (a part a few mm or several m across; --units suggested where
 another unit fits), whether its standing walls hold the toolpath's line (a size that does
 suggested, checked), and which critical surfaces the slicer would fix (one line each, and a
-PNG of the chosen patches). An open surface is checked as `mesp slice --repair` would close
-it. Exit 0 when everything fits, 1 when something does not (each problem says its fix).
+PNG of the chosen patches). A surface `mesp slice` would refuse as open or non-manifold is
+reported with whether `mesp slice --repair` makes it a solid (tried here within a few seconds,
+else said not checked), and the rest is checked on the repaired surface. Exit 0 when
+everything fits, 1 when something does not (each problem says its fix).
 """
 
 
@@ -51,12 +57,14 @@ def run(args: argparse.Namespace) -> int:
     from mesp_cell import profiles
     from planner.cell import load_cell
     from planner.other_cells import bundled_cells
-    from planner.preflight import preflight
+    from planner.preflight import Finding, preflight
     from planner.preflight_figure import critical_patches_png
     from slicer.config import load_job
     from slicer.extrusion import load_profile
-    from slicer.mesh_io import load_surface
-    from slicer.repair import load_repaired
+    from slicer.mesh_io import Surface, load_surface
+    from slicer.repair import repairable
+    from slicer.repair_offer import offer_fix, repair_within
+    from slicer.surface_refusal import SurfaceRefused
     from slicer.toolpath.thin_features import THINNEST
 
     start = time.perf_counter()
@@ -77,20 +85,25 @@ def run(args: argparse.Namespace) -> int:
     cell = load_cell(args.cell)
     # any size is read: a part of 8 m or 8 um is what the units finding is for
     units = replace(job.model, max_size_mm=1e12, min_size_mm=1e-12)
+    mesh: list[Finding] = []
     try:
         surface = load_surface(args.model, units)
     except InputError as exc:
-        if "not watertight" not in exc.problem or "open edges" not in exc.problem:
+        if not isinstance(exc, SurfaceRefused) or not repairable(exc):
             raise
-        surface = load_repaired(args.model, units)  # raises if --repair cannot close it
-        print(f"open surface: {exc.problem}; slice with --repair, which "
-              f"{surface.notes[0].removeprefix('--repair: ')}")
+        outcome = repair_within(args.model, units, REPAIR_SECONDS, exc.reason)
+        fix = offer_fix(exc, outcome, REPAIR_SECONDS, "slice with --repair")
+        if not isinstance(outcome, Surface):  # the rest needs a surface that loads
+            raise InputError(exc.problem, fix) from exc
+        surface = outcome
+        mesh.append(Finding("mesh", False, f"{exc.problem}; {fix}"))
     others = {name: load_cell(path) for name, path in bundled_cells()
               if not (path is None and args.cell is None)
               and not (path is not None and args.cell is not None
                        and path.resolve() == args.cell.resolve())}
     result = preflight(surface, job, cell, width, others)
-    for f in result.findings:
+    findings = (*mesh, *result.findings)
+    for f in findings:
         print(f"{f.topic:>8}: {'ok' if f.ok else 'PROBLEM'}: {f.text}")
     figure = args.figure or Path(f"{args.model.stem}-check.png")
     labels = [f"{k}: {r.selector}, {r.area:.0f} mm^2"
@@ -102,7 +115,7 @@ def run(args: argparse.Namespace) -> int:
     except OSError as exc:
         raise InputError(f"cannot write {figure} ({exc.strerror})",
                          "give a writable path with --figure") from exc
-    problems = [f for f in result.findings if not f.ok]
+    problems = [f for f in findings if not f.ok]
     if problems:
         print(f"mesp: error: {problems[0].text}", file=sys.stderr)
         return 1

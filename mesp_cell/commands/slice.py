@@ -56,8 +56,9 @@ def register(sub: Any) -> None:
     )
     p.add_argument("--planar", action="store_true", help="planar slicing (g = z)")
     p.add_argument("--repair", action="store_true",
-                   help="close every hole of an open surface (a scan) before slicing, and say "
-                   "what changed")
+                   help="close every hole of an open surface (a scan), or wrap an open or "
+                   "non-manifold one with fTetWild's winding-number test, before slicing, and "
+                   "say what changed")
     p.add_argument(
         "--no-baselines",
         action="store_true",
@@ -145,10 +146,11 @@ def run(args: argparse.Namespace) -> int:
     except ThinWallsError as exc:
         raise exc.with_cell(_too_big(cell, exc.bbox_mm)) from exc
     except InputError as exc:
-        if args.repair or "not watertight" not in exc.problem:
-            raise
-        from slicer.repair import repair_offer
+        from slicer.repair import repairable
+        from slicer.repair_offer import repair_offer
 
+        if args.repair or not repairable(exc):
+            raise
         raise repair_offer(args.model, job.model, exc) from exc
     summary = SliceSummary.of(report).as_dict()
     progress.info(f"done: {json.dumps(summary)}; report in {args.out / 'report.json'}")

@@ -100,3 +100,65 @@ def test_mesp_check_refuses_a_thin_tube_and_its_fix_works(
     size = walls.split("--scale-to ")[1].split()[0]
     assert main(["check", str(model), "--scale-to", size, "--figure", str(png)]) == 0
     assert "walls: ok" in capsys.readouterr().out
+
+
+def _open_cup(path: Path, size: float) -> Path:
+    """A cube of ``size`` mm with its top face missing (a hole no crack fill closes)."""
+    box = trimesh.creation.box(extents=(size, size, size))
+    box.apply_translation([size / 2] * 3)
+    box.update_faces(box.face_normals[:, 2] < 0.5)
+    box.export(path)
+    return path
+
+
+def _touching_cubes(path: Path, size: float) -> Path:
+    """Two closed cubes sharing one vertical edge: closed, but non-manifold."""
+    low = trimesh.creation.box(extents=(size, size, size))
+    high = low.copy()
+    high.apply_translation([size, size, 0.0])
+    (low + high).export(path)
+    return path
+
+
+def test_mesp_check_names_the_mesh_problem_and_the_checked_repair(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    model = _open_cup(tmp_path / "cup.stl", 30.0)
+    assert main(["check", str(model), "--figure", str(tmp_path / "cup.png")]) == 1
+    captured = capsys.readouterr()
+    mesh = captured.out.splitlines()[0]
+    assert mesh.startswith("    mesh: PROBLEM: cup.stl is not watertight (4 open edges")
+    assert "slice with --repair (checked: it filled 1 hole" in mesh
+    assert "reach: ok" in captured.out  # the rest is checked on the repaired surface
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("mesp: error: cup.stl is not watertight")
+
+
+def test_mesp_check_offers_the_wrap_of_touching_cubes(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from mesp_cell.commands import check
+    from slicer import tet_cache
+
+    monkeypatch.setenv(tet_cache.CACHE_ENV, str(tmp_path / "cache"))
+    monkeypatch.setattr(check, "REPAIR_SECONDS", 600.0)  # a loaded host; 10 s in use
+    model = _touching_cubes(tmp_path / "cubes.stl", 20.0)
+    assert main(["check", str(model), "--figure", str(tmp_path / "cubes.png")]) == 1
+    mesh = capsys.readouterr().out.splitlines()[0]
+    assert "mesh: PROBLEM: cubes.stl is not watertight (1 non-manifold edges)" in mesh
+    assert "slice with --repair (checked: it wrapped by fTetWild's winding-number test" in mesh
+
+
+def test_mesp_check_says_when_the_repair_was_not_checked(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    from mesp_cell.commands import check
+    from slicer import tet_cache
+
+    monkeypatch.setenv(tet_cache.CACHE_ENV, str(tmp_path / "cache"))  # no stored wrap
+    monkeypatch.setattr(check, "REPAIR_SECONDS", 0.0)
+    model = _touching_cubes(tmp_path / "cubes.stl", 20.0)
+    assert main(["check", str(model), "--figure", str(tmp_path / "cubes.png")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "(1 non-manifold edges)" in err[0]
+    assert "or try --repair (fTetWild's wrap: not checked here" in err[0]
+    assert "checked: it" not in err[0]

@@ -13,6 +13,7 @@ from core.errors import InputError
 from core.stages import TetMesh
 from slicer.config import ModelConfig
 from slicer.mesh_io import load_surface, load_tet_mesh, write_tet_mesh
+from slicer.surface_refusal import SurfaceReason, SurfaceRefused
 from slicer.tet_geometry import tet_volumes
 
 
@@ -104,6 +105,25 @@ def test_open_box_is_refused_with_edge_count(tmp_path: Path) -> None:
     box.update_faces(~top)
     error = _refused(_write(box, tmp_path / "open.stl"), "not watertight", "4 open edges")
     assert "hole" in error.problem
+    assert isinstance(error, SurfaceRefused) and error.reason is SurfaceReason.OPEN
+
+
+def test_cubes_sharing_an_edge_are_refused_as_non_manifold(tmp_path: Path) -> None:
+    low = _box(10.0)
+    high = low.copy()
+    high.apply_translation([10.0, 10.0, 0.0])  # one vertical edge shared by 4 faces
+    both = low + high
+    error = _refused(_write(both, tmp_path / "touching.stl"), "1 non-manifold edges")
+    assert isinstance(error, SurfaceRefused) and error.reason is SurfaceReason.NON_MANIFOLD
+
+
+def test_a_file_problem_carries_no_surface_reason(tmp_path: Path) -> None:
+    error = _refused(tmp_path / "nope.stl", "does not exist")
+    assert not isinstance(error, SurfaceRefused)
+
+
+def test_every_surface_reason_says_what_it_means() -> None:
+    assert all(reason.message for reason in SurfaceReason)
 
 
 def test_tiny_crack_is_filled_with_note(tmp_path: Path) -> None:
@@ -149,7 +169,8 @@ def test_flat_mesh_has_zero_volume(tmp_path: Path) -> None:
     f = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])
     path = tmp_path / "flat.obj"
     _write(trimesh.Trimesh(v, f, process=False), path)
-    _refused(path, "no volume")
+    error = _refused(path, "no volume")
+    assert isinstance(error, SurfaceRefused) and error.reason is SurfaceReason.FLAT
 
 
 def test_ten_km_cube_suggests_units(tmp_path: Path) -> None:

@@ -1,4 +1,5 @@
-"""--repair: every hole of an open surface closed, and the one line saying what changed."""
+"""--repair: every hole of an open surface closed or the surface wrapped, picked by the
+refusal's reason, kept per input, and the one line saying what changed."""
 
 from __future__ import annotations
 
@@ -10,16 +11,23 @@ import trimesh
 
 from core.errors import InputError
 from mesp_cell.cli import main
-from slicer import repair
+from slicer import tet_cache, wrap_cache
 from slicer.mesh_io import load_surface
-from slicer.repair import fill_holes, load_repaired, repair_offer
+from slicer.repair import fill_holes, load_repaired, repairable
+from slicer.repair_offer import repair_offer
+from slicer.surface_refusal import SurfaceReason, SurfaceRefused
 from slicer.winding_repair import (
+    Wrap,
     bisect_crowded,
     boundary_faces,
     non_manifold_edges,
     split_pinches,
     wrap,
 )
+
+# Seconds a test gives the check that --repair works (the host may be loaded; the 30 s the
+# refusal waits is the product's limit, not what these tests measure).
+WAIT = 600.0
 
 
 def _open_cup(size: float = 30.0) -> trimesh.Trimesh:
@@ -54,6 +62,8 @@ def test_load_repaired_says_what_changed(tmp_path: Path) -> None:
     _open_cup(30.0).export(path)
     with pytest.raises(InputError) as refused:
         load_surface(path)
+    assert isinstance(refused.value, SurfaceRefused)
+    assert refused.value.reason is SurfaceReason.OPEN
     surface = load_repaired(path)
     assert surface.volume_mm3 == pytest.approx(27000.0)
     assert surface.notes[0] == ("--repair: filled 1 hole (4 open edges, largest 120.0 mm "
@@ -122,7 +132,7 @@ def test_non_manifold_refusal_offers_and_applies_the_wrap(tmp_path: Path) -> Non
     with pytest.raises(InputError) as refused:
         load_surface(path)
     assert "non-manifold edges" in refused.value.problem
-    offer = repair_offer(path, "mm", refused.value)
+    offer = repair_offer(path, "mm", refused.value, seconds=WAIT)
     assert "re-run with --repair (checked: it wrapped by fTetWild" in offer.one_line()
     surface = load_repaired(path)
     mesh = surface.as_trimesh()
@@ -143,9 +153,13 @@ def test_a_soup_is_still_refused(tmp_path: Path) -> None:
     with pytest.raises(InputError) as refused:
         load_surface(path)
     assert "not watertight" in refused.value.problem
-    assert repair_offer(path, "mm", refused.value) is refused.value
-    with pytest.raises(InputError):
+    offer = repair_offer(path, "mm", refused.value, seconds=WAIT)
+    assert offer.fix.startswith(refused.value.fix)
+    assert "(--repair was tried: filled 40 holes (the filled surface encloses no volume" in (
+        offer.fix)
+    with pytest.raises(InputError) as still:
         load_repaired(path)
+    assert "its faces enclose nothing (open sheets, a polygon soup)" in still.value.fix
 
 
 def test_boxes_touching_along_an_edge_become_two_shells() -> None:
@@ -184,9 +198,145 @@ def test_a_wrap_past_its_time_is_not_offered_as_checked(
     _stacked_boxes(20.0).export(path)
     with pytest.raises(InputError) as refused:
         load_surface(path)
-    monkeypatch.setattr(repair, "OFFER_SECONDS", 0.0)
-    offer = repair_offer(path, "mm", refused.value)
+    monkeypatch.setenv(tet_cache.CACHE_ENV, str(tmp_path / "cache"))  # nothing stored
+    offer = repair_offer(path, "mm", refused.value, seconds=0.0)
     assert offer.problem == refused.value.problem
     assert offer.fix.startswith(refused.value.fix)
     assert "or try --repair (fTetWild's wrap: not checked here" in offer.fix
     assert "checked: it" not in offer.fix
+
+
+def _cubes_sharing_an_edge(size: float = 10.0) -> trimesh.Trimesh:
+    """Two closed cubes touching along one vertical edge (used by 4 faces)."""
+    low = trimesh.creation.box(extents=(size, size, size))
+    high = low.copy()
+    high.apply_translation([size, size, 0.0])
+    both = low + high
+    both.merge_vertices()
+    return both
+
+
+def _cube_with_a_fin(size: float = 20.0) -> trimesh.Trimesh:
+    """A closed cube with one triangle standing on a top edge: 2 open edges (a hole too
+    large to be a crack) and 1 edge of 3 faces; filling the fin's loop leaves it refused."""
+    box = trimesh.creation.box(extents=(size, size, size))
+    edge = np.flatnonzero(np.isclose(box.vertices[:, 2], size / 2)
+                          & np.isclose(box.vertices[:, 0], size / 2))
+    v = np.vstack([box.vertices, [[size / 2, 0.0, 1.5 * size]]])
+    return trimesh.Trimesh(v, np.vstack([box.faces, [[edge[0], edge[1], 8]]]), process=False)
+
+
+def test_the_repair_is_picked_by_the_reason_not_the_words() -> None:
+    words = "m.stl is not watertight (3 open edges)"
+    assert repairable(SurfaceRefused("any words", "fix", SurfaceReason.OPEN))
+    assert repairable(SurfaceRefused("any words", "fix", SurfaceReason.NON_MANIFOLD))
+    assert not repairable(SurfaceRefused(words, "fix", SurfaceReason.FLAT))
+    assert not repairable(InputError(words, "fix"))
+    plain = InputError(words, "fix")
+    assert repair_offer("m.stl", "mm", plain) is plain
+
+
+def test_cubes_sharing_an_edge_are_wrapped_into_two_shells(tmp_path: Path) -> None:
+    path = tmp_path / "touching.stl"
+    _cubes_sharing_an_edge(10.0).export(path)
+    surface = load_repaired(path)
+    mesh = surface.as_trimesh()
+    assert mesh.is_watertight and mesh.body_count == 2
+    assert surface.volume_mm3 == pytest.approx(2000.0, rel=0.03)
+    assert "(1 non-manifold edges resolved" in surface.notes[0]
+
+
+def test_an_open_surface_the_fill_cannot_close_is_wrapped(tmp_path: Path) -> None:
+    path = tmp_path / "fin.stl"
+    _cube_with_a_fin(20.0).export(path)
+    with pytest.raises(SurfaceRefused) as refused:
+        load_surface(path)
+    assert refused.value.reason is SurfaceReason.OPEN
+    surface = load_repaired(path)
+    assert surface.as_trimesh().is_watertight
+    assert surface.volume_mm3 == pytest.approx(8000.0, rel=0.03)  # the fin encloses nothing
+    assert surface.notes[0].startswith("--repair: wrapped by fTetWild's winding-number test "
+                                       "(2 open and 1 non-manifold edges resolved")
+
+
+def _counting_wrap(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """Count fTetWild's wraps made through the cache."""
+    calls: list[int] = []
+    real = wrap_cache.wrap_troubled
+
+    def counted(vertices: np.ndarray, faces: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray, Wrap]:
+        calls.append(len(faces))
+        return real(vertices, faces)
+
+    monkeypatch.setattr(wrap_cache, "wrap_troubled", counted)
+    return calls
+
+
+def test_a_repeated_repair_reads_the_stored_wrap(tmp_path: Path,
+                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(tet_cache.CACHE_ENV, str(tmp_path / "cache"))
+    calls = _counting_wrap(monkeypatch)
+    path = tmp_path / "stacked.obj"
+    _stacked_boxes(20.0).export(path)
+    first = load_repaired(path)
+    again = load_repaired(path, "cm")  # other units: the same wrap, scaled
+    assert len(calls) == 1
+    assert np.array_equal(10.0 * first.vertices, again.vertices)
+    assert np.array_equal(first.faces, again.faces)
+    assert list((tmp_path / "cache").glob("wrap-*.npz"))
+
+
+def test_without_the_cache_every_repair_wraps_again(tmp_path: Path,
+                                                    monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(tet_cache.CACHE_ENV, "off")
+    calls = _counting_wrap(monkeypatch)
+    path = tmp_path / "stacked.obj"
+    _stacked_boxes(20.0).export(path)
+    load_repaired(path)
+    load_repaired(path)
+    assert len(calls) == 2
+
+
+def test_the_offer_checks_wrap_is_the_one_repair_uses(tmp_path: Path,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv(tet_cache.CACHE_ENV, str(tmp_path / "cache"))
+    path = tmp_path / "stacked.obj"
+    _stacked_boxes(20.0).export(path)
+    with pytest.raises(InputError) as refused:
+        load_surface(path)
+    offer = repair_offer(path, "mm", refused.value, seconds=WAIT)  # wraps in a child
+    assert isinstance(offer, SurfaceRefused) and offer.reason is SurfaceReason.NON_MANIFOLD
+    calls = _counting_wrap(monkeypatch)
+    surface = load_repaired(path)
+    assert calls == []  # read back, not wrapped again
+    assert f"(checked: it {surface.notes[0].removeprefix('--repair: ')})" in offer.fix
+
+
+def test_a_face_with_two_crowded_edges_gets_both_split_in_two_rounds() -> None:
+    """Cube A with cubes touching two of its top edges: a face of A holds both crowded
+    edges; each round splits one of them (the lowest), so neither stays blocked."""
+    def cube(at: tuple[float, float, float]) -> trimesh.Trimesh:
+        box = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+        box.apply_translation(at)
+        return box
+
+    both = cube((0.0, 0.0, 0.0)) + cube((10.0, 0.0, 10.0)) + cube((0.0, 10.0, 10.0))
+    both.merge_vertices()
+    v, f = np.asarray(both.vertices, dtype=np.float64), np.asarray(both.faces)
+    uses = {}
+    for a, b in np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1):
+        uses[(a, b)] = uses.get((a, b), 0) + 1
+    face = next(t for t in f if sum(uses[tuple(sorted((t[k], t[(k + 1) % 3])))] > 2
+                                    for k in range(3)) == 2)
+    crowded = [tuple(sorted((face[k], face[(k + 1) % 3]))) for k in range(3)
+               if uses[tuple(sorted((face[k], face[(k + 1) % 3])))] > 2]
+    mids = [0.5 * (v[a] + v[b]) for a, b in crowded]
+
+    def split_at(points: np.ndarray) -> list[bool]:
+        return [bool(np.any(np.linalg.norm(points - m, axis=1) < 1e-9)) for m in mids]
+
+    v1, f1 = bisect_crowded(v, f)
+    assert sorted(split_at(v1)) == [False, True]  # one per face and round
+    v2, _ = bisect_crowded(v1, f1)
+    assert split_at(v2) == [True, True]
