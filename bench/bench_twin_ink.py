@@ -7,7 +7,7 @@ emulator does. Each switch reaches it after a random wall-clock latency (the bus
 a loaded host) and the servo loop is descheduled now and then (``--stall-ms``). Printed: the
 plant's ink against the plan's (rate x deposition time) per run, and the median, for switches
 timed by the twin's own time (``sim_now``, the product) and by the shared clock (``--decided
-clock``, the timing before session 20).
+clock``, the timing the product had before).
 
     PYTHONPATH=$PWD python bench/bench_twin_ink.py --scale 40 --latency-ms 60 --runs 3
     PYTHONPATH=$PWD python bench/bench_twin_ink.py --scale 40 --latency-ms 60 --decided clock
@@ -63,17 +63,31 @@ def _plant(path: str, scale: float, conn: Connection) -> None:
 def run(scale: float, pulses: int, latency_ms: float, stall_ms: float, seed: int,
         twin_time: bool) -> tuple[float, float]:
     """(ink, planned ink), nominal mm^3, of one stream of ``pulses`` pulses."""
+    rng = random.Random(seed)  # the plan and the stalls (servo thread)
+    latency_rng = random.Random(seed + 1)  # the switches' latency (switcher thread)
+    path = str(Path(tempfile.mkdtemp()) / "sim.clock")
+    ctx = mp.get_context("spawn")  # this process has threads: no fork
+    link, plant_end = ctx.Pipe()
+    proc = ctx.Process(target=_plant, args=(path, scale, plant_end))
+    proc.start()
+    try:
+        return _stream(scale, pulses, latency_ms, stall_ms, rng, latency_rng, path, link,
+                       twin_time)
+    finally:
+        proc.kill()
+        proc.join()
+
+
+def _stream(scale: float, pulses: int, latency_ms: float, stall_ms: float,
+            rng: random.Random, latency_rng: random.Random, path: str, link: Connection,
+            twin_time: bool) -> tuple[float, float]:
+    """``run`` with the plant's process started: stream the plan, return (ink, planned)."""
     from mesp_cell.drivers.robot_base import ServoConfig
     from mesp_cell.drivers.robot_twin import KinematicTwin
     from mesp_cell.drivers.sim_clock import SimClock
     from mesp_cell.drivers.stream import ServoStream, StreamPlan
     from mesp_cell.nodes.extruder_switch import Switcher
 
-    rng = random.Random(seed)
-    path = str(Path(tempfile.mkdtemp()) / "sim.clock")
-    link, plant_end = mp.Pipe()
-    proc = mp.Process(target=_plant, args=(path, scale, plant_end))
-    proc.start()
     assert link.recv() == "ready"
     gaps = [rng.uniform(0.5, 2.0) if i % 2 == 0 else rng.uniform(2.0, 6.0)
             for i in range(2 * pulses)]
@@ -91,7 +105,7 @@ def run(scale: float, pulses: int, latency_ms: float, stall_ms: float, seed: int
     lock = threading.Lock()
 
     def send(verb: str, rate: float) -> str:
-        time.sleep(rng.uniform(0.0, latency_ms) / 1000.0)
+        time.sleep(latency_rng.uniform(0.0, latency_ms) / 1000.0)
         with lock:
             link.send((verb, rate))
             link.recv()
@@ -114,14 +128,15 @@ def run(scale: float, pulses: int, latency_ms: float, stall_ms: float, seed: int
         if stall_ms and rng.random() < 5e-4:
             time.sleep(rng.uniform(0.0, stall_ms) / 1000.0)  # the servo thread descheduled
 
-    ServoStream(twin, plan, 0, on_sample=on_sample).run()
-    time.sleep(max(latency_ms / 1000.0, 0.05) + 0.2)  # the last switch lands
-    stopping.set()
-    sender.join()
+    try:
+        ServoStream(twin, plan, 0, on_sample=on_sample).run()
+        time.sleep(max(latency_ms / 1000.0, 0.05) + 0.2)  # the last switch lands
+    finally:
+        stopping.set()
+        sender.join()
     with lock:
         link.send(("quit",))
         ink = float(link.recv())
-    proc.join()
     return ink, float(np.count_nonzero(on_k)) * DT * RATE
 
 

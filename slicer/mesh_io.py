@@ -255,21 +255,35 @@ def _consistent_winding(faces: np.ndarray) -> tuple[np.ndarray, bool]:
     return flip, True
 
 
-def _repair(mesh: trimesh.Trimesh, name: str, notes: list[str]) -> trimesh.Trimesh:
-    """Merge, drop degenerate faces, fill small holes, fix winding; refuse what stays open."""
+def clean_faces(mesh: trimesh.Trimesh, mm_per_unit: float = 1.0) -> int:
+    """Merge coincident vertices and drop exact repeats and degenerate faces (lower than
+    ``tol.merge`` mm; ``mm_per_unit``: the mesh's unit), in place: export noise, removed the
+    same way before every check of a surface and before its repair. Returns the faces dropped.
+    A face and its reverse are not repeats (together a zero-thickness sheet, refused later)."""
     mesh.merge_vertices(merge_tex=True, merge_norm=True)
     faces_before = len(mesh.faces)
-    # Exact repeats (same vertices, same turning sense) are export noise; a face and its
-    # reverse are not repeats (together they are a zero-thickness sheet, refused later).
     shift = np.argmin(mesh.faces, axis=1)
     cyclic = np.take_along_axis(mesh.faces, (shift[:, None] + np.arange(3)) % 3, axis=1)
     _, first = np.unique(cyclic, axis=0, return_index=True)
     unique = np.zeros(len(mesh.faces), dtype=bool)
     unique[first] = True
-    mesh.update_faces(unique & mesh.nondegenerate_faces(height=tol.merge))
+    mesh.update_faces(unique & mesh.nondegenerate_faces(height=tol.merge / mm_per_unit))
     mesh.remove_unreferenced_vertices()
-    if len(mesh.faces) < faces_before:
-        notes.append(f"removed {faces_before - len(mesh.faces)} duplicate or degenerate faces")
+    return faces_before - len(mesh.faces)
+
+
+def mm_per_unit(vertices: np.ndarray, units: str | ModelConfig) -> float:
+    """mm per coordinate unit of a file's ``vertices`` (N, 3) as ``load_surface`` scales
+    them: the unit, times the ``scale_to`` factor where one is asked for."""
+    config = model_config(units)
+    return config.scale_mm * _scale_to(np.asarray(vertices) * config.scale_mm, config, [])
+
+
+def _repair(mesh: trimesh.Trimesh, name: str, notes: list[str]) -> trimesh.Trimesh:
+    """Merge, drop degenerate faces, fill small holes, fix winding; refuse what stays open."""
+    dropped = clean_faces(mesh)
+    if dropped:
+        notes.append(f"removed {dropped} duplicate or degenerate faces")
     if len(mesh.faces) == 0:
         raise SurfaceRefused(f"{name} has only degenerate triangles", "export the model again",
                              SurfaceReason.DEGENERATE)

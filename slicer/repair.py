@@ -31,7 +31,7 @@ import trimesh
 from core.errors import InputError
 from core.tolerance import tol
 from slicer.config import ModelConfig
-from slicer.mesh_io import Surface, load_surface
+from slicer.mesh_io import Surface, clean_faces, load_surface, mm_per_unit
 from slicer.surface_refusal import SurfaceReason, SurfaceRefused
 from slicer.wrap_cache import cached_wrap, stored_wrap
 
@@ -124,8 +124,7 @@ def load_repaired(path: str | Path, units: str | ModelConfig = "mm", wrap: bool 
     mesh = trimesh.load_mesh(path, file_type=path.suffix.lower().lstrip("."), process=False)
     if isinstance(mesh, trimesh.Scene):
         mesh = mesh.to_geometry()
-    mesh.merge_vertices(merge_tex=True, merge_norm=True)
-    mesh.update_faces(mesh.unique_faces() & mesh.nondegenerate_faces())  # as load_surface
+    clean_faces(mesh, mm_per_unit(mesh.vertices, units))  # the faces load_surface checked
     return _REPAIRS[reason](path, units, mesh, wrap)
 
 

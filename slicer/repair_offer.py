@@ -102,7 +102,7 @@ def offer_fix(refusal: InputError, outcome: Surface | InputError | None, seconds
     ``use`` --repair (checked, what it changes), or the refusal's fix and that --repair was
     tried and does not help, or was not checked in time."""
     if outcome is None:
-        return (f"{refusal.fix}; or try --repair (fTetWild's wrap: not checked here, it takes "
+        return (f"{refusal.fix}; or {use} (fTetWild's wrap: not checked here, it takes "
                 f"over {seconds:.0f} s on this mesh)")
     if isinstance(outcome, InputError):
         return f"{refusal.fix} (--repair was tried: {_tried(outcome)})"

@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import zipfile
 from dataclasses import asdict
 from importlib import metadata
 from pathlib import Path
@@ -50,21 +51,21 @@ def load(folder: Path, key: str) -> tuple[np.ndarray, np.ndarray, Wrap] | None:
             return (np.asarray(data["vertices"], dtype=np.float64),
                     np.asarray(data["faces"], dtype=np.int64),
                     Wrap(**json.loads(str(data["summary"]))))
-    except (OSError, KeyError, ValueError, TypeError):
-        return None
+    except (OSError, EOFError, zipfile.BadZipFile, KeyError, ValueError, TypeError):
+        return None  # a missing, truncated or corrupt file is a miss: wrapped again
 
 
 def store(folder: Path, key: str, vertices: np.ndarray, faces: np.ndarray,
           summary: Wrap) -> None:
     """Keep the wrap for ``key`` (best effort: a cache that cannot be written is skipped)."""
+    tmp = folder / f".wrap-{key}.{os.getpid()}.npz"
     try:
         folder.mkdir(parents=True, exist_ok=True)
-        tmp = folder / f".wrap-{key}.{os.getpid()}.npz"
         np.savez(tmp, vertices=vertices, faces=faces,
                  summary=np.array(json.dumps(asdict(summary))))
         os.replace(tmp, folder / f"wrap-{key}.npz")
     except OSError:
-        return
+        tmp.unlink(missing_ok=True)
 
 
 def stored_wrap(vertices: np.ndarray, faces: np.ndarray

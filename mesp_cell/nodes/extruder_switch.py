@@ -44,6 +44,7 @@ log = logging.getLogger("mesp.robot")
 HOLD_KEY = "switch"  # the switches' hold on the twin's shared clock
 HOLD_S = 1.0  # s of wall time a switch holds the clock at most (the bus request's timeout)
 DUE_WAIT_S = 0.05  # s of wall time a switch waits at most for the shared clock to reach it
+REWIND_S = 1.0  # s: a clock this far behind the latest reading was reset (a new emulator)
 
 
 class Switch(NamedTuple):
@@ -92,7 +93,7 @@ class Switcher:
     def clock(self) -> float:
         """The flow's clock, never back: a twin that lags pulls the shared clock back to its
         own time, and the emulated flow holds until the clock passes where it was."""
-        self._latest = max(self._latest, self._clock())
+        self._latest = _forward(self._latest, self._clock())
         return self._latest
 
     def put(self, verb: str, rate: float, step: float = 0.0,
@@ -100,7 +101,7 @@ class Switcher:
         """Queue a switch decided now (thread-safe; returns at once); on the twin, hold the
         clock at now until it is sent."""
         with self._pending_lock:
-            self._latest_due = max(self._latest_due, self._decided())
+            self._latest_due = _forward(self._latest_due, self._decided())
             sw = Switch(verb, rate, step, self._latest_due, job_dir)
             if self.sim_clock is not None:
                 self._pending.append(sw.due)
@@ -134,9 +135,9 @@ class Switcher:
                 if why:
                     log.warning("extruder %s refused: %s", sw.verb, why)
                     continue
-                # on the twin the hold lands it at ``due`` (the clock may not yet be there
-                # when the twin runs ahead of it: that is no latency)
-                self._record(sw, max(0.0, self.clock() - sw.due))
+                # on the twin the hold lands it at ``due``: 0, or < 0 where the wait for the
+                # clock timed out and the extruder took it early
+                self._record(sw, self.clock() - sw.due)
             finally:
                 self._sent()
 
@@ -167,6 +168,12 @@ class Switcher:
             ledger.switch(self.excess_mm3(sw.step, latency), latency)
         finally:
             ledger.close()
+
+
+def _forward(latest: float, now: float) -> float:
+    """``now``, never back from ``latest`` (a twin that lags pulls the shared clock back a
+    little), unless the clock was reset (``REWIND_S`` behind)."""
+    return now if now < latest - REWIND_S else max(latest, now)
 
 
 def wall_clock() -> float:

@@ -7,6 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from mesp_cell.drivers import registers as R
+from mesp_cell.drivers.extruder_plant import ExtruderPlant, PlantParams
+from mesp_cell.drivers.sim_clock import SimClock
 from mesp_cell.nodes import print_ledger
 from mesp_cell.nodes.extruder_switch import Switcher
 
@@ -19,6 +22,21 @@ class Clock:
 
     def __call__(self) -> float:
         return self.t
+
+
+def plant_on_shared_clock(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, rate: float,
+                          running: bool) -> tuple[Clock, ExtruderPlant, SimClock]:
+    """A wall clock the test moves, an extruder plant (flow settles in 0.1 ms) at ``rate`` on
+    the shared clock file, and the twin's view of that clock (scale 1)."""
+    wall = Clock()
+    wall.t = 1000.0
+    monkeypatch.setattr(SimClock, "wall", staticmethod(wall))
+    path = tmp_path / "sim.clock"
+    plant = ExtruderPlant(PlantParams(tau_s=1e-4, watchdog_s=0.0), wall(),
+                          SimClock(1.0, path, reset=True))
+    plant.set_rate(rate, wall())
+    plant.command(R.CMD_RUN if running else 0, wall())
+    return wall, plant, SimClock(1.0, path)
 
 
 def run_switches(time_scale: float, tmp_path: Path) -> tuple[list[tuple[str, float]], Clock]:
@@ -66,20 +84,8 @@ def test_on_the_twin_a_late_switch_lands_at_its_simulated_time(
     # 120 ms later (a loaded host: the switcher's thread, the bus, the extruder node), while
     # the extruder polls on every 5 ms. Holding the shared clock at the decision, the
     # extruder takes it at 0.5 s: 0.5 s of flow (of the 1 s it could run), not 0.62 (0.38).
-    from mesp_cell.drivers import registers as R
-    from mesp_cell.drivers.extruder_plant import ExtruderPlant, PlantParams
-    from mesp_cell.drivers.sim_clock import SimClock
-
-    wall = Clock()
-    wall.t = 1000.0
-    monkeypatch.setattr(SimClock, "wall", staticmethod(wall))
-    path = tmp_path / "sim.clock"
     rate = 5.0
-    plant = ExtruderPlant(PlantParams(tau_s=1e-4, watchdog_s=0.0), wall(),
-                          SimClock(1.0, path, reset=True))
-    plant.set_rate(rate, wall())
-    plant.command(R.CMD_RUN if verb == "stop" else 0, wall())
-    twin_clock = SimClock(1.0, path)
+    wall, plant, twin_clock = plant_on_shared_clock(tmp_path, monkeypatch, rate, verb == "stop")
     stopping = threading.Event()
 
     def send(verb: str, rate: float) -> str:
@@ -108,20 +114,8 @@ def test_a_switch_decided_while_an_earlier_one_holds_the_clock_keeps_its_own_tim
     # at 0.5 s, the start is decided: timed by the twin's own time it lands at 0.55 s, so
     # the screw ran 0.5 + 0.45 s of the second; timed by the held clock it landed at 0.5 s
     # too and the screw ran through the travel (1.0 s).
-    from mesp_cell.drivers import registers as R
-    from mesp_cell.drivers.extruder_plant import ExtruderPlant, PlantParams
-    from mesp_cell.drivers.sim_clock import SimClock
-
-    wall = Clock()
-    wall.t = 1000.0
-    monkeypatch.setattr(SimClock, "wall", staticmethod(wall))
-    path = tmp_path / "sim.clock"
     rate = 5.0
-    plant = ExtruderPlant(PlantParams(tau_s=1e-4, watchdog_s=0.0), wall(),
-                          SimClock(1.0, path, reset=True))
-    plant.set_rate(rate, wall())
-    plant.command(R.CMD_RUN, wall())
-    twin_clock = SimClock(1.0, path)
+    wall, plant, twin_clock = plant_on_shared_clock(tmp_path, monkeypatch, rate, True)
     twin = Clock()  # the twin's own simulated time: it keeps pace with the wall here
     stopping = threading.Event()
     sent: list[str] = []

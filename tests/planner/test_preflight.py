@@ -160,5 +160,5 @@ def test_mesp_check_says_when_the_repair_was_not_checked(
     assert main(["check", str(model), "--figure", str(tmp_path / "cubes.png")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "(1 non-manifold edges)" in err[0]
-    assert "or try --repair (fTetWild's wrap: not checked here" in err[0]
+    assert "or slice with --repair (fTetWild's wrap: not checked here" in err[0]
     assert "checked: it" not in err[0]

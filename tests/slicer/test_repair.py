@@ -202,7 +202,7 @@ def test_a_wrap_past_its_time_is_not_offered_as_checked(
     offer = repair_offer(path, "mm", refused.value, seconds=0.0)
     assert offer.problem == refused.value.problem
     assert offer.fix.startswith(refused.value.fix)
-    assert "or try --repair (fTetWild's wrap: not checked here" in offer.fix
+    assert "or re-run with --repair (fTetWild's wrap: not checked here" in offer.fix
     assert "checked: it" not in offer.fix
 
 
