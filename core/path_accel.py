@@ -4,9 +4,10 @@ The slicer changes the nozzle speed inside a path where it changes the width (W 
 the stripe joins print narrower, so faster (``slicer.toolpath.stripe_joins``). The arm
 reaches a speed change only as fast as its joint accelerations allow, and at a turn, where
 the wrist turns with the path, that is far less than on a straight line. The value is a cell
-setting: it lives in the cell file (``[planning] path_accel_mm_s2``), the planner validates
-it with the other limits of the cell, and the slicer receives it (``bundled``) to shape its
-speed ramps so the planned speed can follow them.
+setting: it lives in the cell file (``[planning] path_accel_mm_s2``); the slicer shapes its
+speed ramps to the bundled cell's (``bundled_path_accel``), and the planner reports the
+toolpath segments that ask more than the job's cell gives (``plan.path_accel`` in
+report.json, ``planner.flow.asked_acceleration``).
 """
 
 from __future__ import annotations

@@ -9,6 +9,7 @@ import pytest
 from numpy.typing import NDArray
 from scipy.spatial import Delaunay
 
+from core.path_accel import bundled_path_accel
 from core.stages import Layers, Pattern
 from slicer.config import JobConfig
 from slicer.extrusion import load_profile
@@ -16,7 +17,6 @@ from slicer.toolpath.build import compute_toolpath
 from slicer.toolpath.coverage import layer_coverage
 from slicer.toolpath.linking import LinkedPath
 from slicer.toolpath.results import Waypoints
-from core.path_accel import bundled_path_accel
 from slicer.toolpath.stripe_joins import (
     JOIN_SCALE,
     JOIN_TAPER,
