@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from core.path_accel import bundled_path_accel
+from core.path_accel import bundled_path_accel, bundled_turn_accel
 from core.stages import LayerMesh, Pattern
 from core.tolerance import tol
 from slicer.config import ToolpathConfig
@@ -111,7 +111,8 @@ class Component:
         self.pattern = pattern
         self.cfg = cfg
         self.profile = profile
-        self.path_accel = bundled_path_accel()  # mm/s^2, the cell's (``core.path_accel``)
+        # mm/s^2 and rad/s^2: the speed changes the cell's arm follows (``core.path_accel``)
+        self.path_accel, self.turn_accel = bundled_path_accel(), bundled_turn_accel()
         self.width = profile.width(self.height)
         # the profile table's speeds: a width scaled by the speed stays within them
         self.v_lo, self.v_hi = (float(x) for x in profile.speed_for_height(
@@ -221,7 +222,7 @@ class Component:
             on = linked.face >= 0
             v_link[on] = self.values_at(linked.face[on], linked.bary[on], scale)[1]
             linked, pace = narrow_joins(linked, self.vertices, self.faces, v_link,
-                                        self.path_accel)
+                                        self.path_accel, self.turn_accel)
         return Built(lines, linked, self._waypoints(linked, scale, pace), scale=scale)
 
     def _waypoints(self, linked: LinkedPath, scale: NDArray[np.float64] | None = None,

@@ -26,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 from numpy.typing import NDArray
 
+from core.path_accel import path_accel
 from core.stages import Layers, Pattern, Toolpath
 from core.tolerance import tol
 from slicer.toolpath.coverage import layer_coverage
@@ -57,10 +58,10 @@ class JoinRamp(NamedTuple):
 
 
 def join_ramp(length: NDArray[np.float64], v_a: NDArray[np.float64],
-              v_b: NDArray[np.float64], accel: float) -> JoinRamp:
-    """The fastest join an arm with the path acceleration ``accel`` (mm/s^2,
-    ``core.path_accel``) follows: joins of ``length`` (J,) mm between line ends printed at
-    ``v_a`` and ``v_b`` (J,) mm/s.
+              v_b: NDArray[np.float64], accel: NDArray[np.float64] | float) -> JoinRamp:
+    """The fastest join an arm with the path acceleration ``accel`` (mm/s^2, per join or
+    one for all, ``core.path_accel``) follows: joins of ``length`` (J,) mm between line
+    ends printed at ``v_a`` and ``v_b`` (J,) mm/s.
 
     The speed rises linearly in arc length over ``ramp_a`` from v_a to pace x v_a (and falls
     likewise to v_b): the acceleration v dv/dx is largest at the top, pace (pace - 1) v_a^2
@@ -91,14 +92,16 @@ def locate(points: NDArray[np.float64], vertices: NDArray[np.float64],
 
 
 def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArray[np.int32],
-                 speed: NDArray[np.float64], accel: float
+                 speed: NDArray[np.float64], accel: float, turn_accel: float
                  ) -> tuple[LinkedPath, NDArray[np.float64]]:
     """``linked`` with a point added at the top of each end's speed ramp of every join (a
     run of connector segments, ``LinkedPath.connector_segments``; ``join_ramp``), and the
     (N',) float64 pace of every point: its speed over the line speed there, 1 on the
     lines, rising linearly in arc length along each ramp to the join's pace. ``speed``
-    (N,) mm/s is the line speed at each point of ``linked``, ``accel`` mm/s^2 the path
-    acceleration (``core.path_accel``). The added points lie on the layer (``vertices``
+    (N,) mm/s is the line speed at each point of ``linked``; ``accel`` mm/s^2 and
+    ``turn_accel`` rad/s^2 give each join its path acceleration from the turn of the
+    printing direction (``linked.normal``) along it (``core.path_accel.path_accel``). The
+    added points lie on the layer (``vertices``
     (n, 3) mm, ``faces`` (m, 3)): the point nearest to the join's line there, with its
     face and barycentrics. A line end keeps its width, so the line's last segment is not
     tapered.
@@ -119,7 +122,14 @@ def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArr
     length = arc[last] - arc[first]
     keep = length > 0
     first, last, length = first[keep], last[keep], length[keep]
-    ramp = join_ramp(length, speed[first], speed[last], accel)
+    # the printing direction's turn per mm along each join: the wrist turns with it
+    norm = np.linalg.norm(linked.normal, axis=1)
+    nrm = linked.normal / np.maximum(norm, tol.zero)[:, None]
+    turn = np.where((norm[1:] > tol.zero) & (norm[:-1] > tol.zero), np.arccos(np.clip(
+        np.einsum("ij,ij->i", nrm[1:], nrm[:-1]), -1.0, 1.0)), 0.0)
+    turned = np.concatenate([[0.0], np.cumsum(turn)])
+    rate = (turned[last] - turned[first]) / length
+    ramp = join_ramp(length, speed[first], speed[last], path_accel(rate, accel, turn_accel))
     # the added points: at the top of either ramp, on the segment of the join that holds it
     at_a = arc[first] + ramp.ramp_a
     at_b = arc[last] - ramp.ramp_b

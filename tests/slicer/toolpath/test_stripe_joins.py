@@ -49,7 +49,7 @@ def test_each_join_gets_a_point_inside_either_end_and_prints_narrow() -> None:
                         np.zeros((8, 3)), np.ones(8, bool), path, piece)
     # an arm that follows any speed change: the join prints at 1 / JOIN_SCALE x the speed
     # between its tapers
-    out, pace = narrow_joins(linked, v, f, np.full(8, 5.0), 1e6)
+    out, pace = narrow_joins(linked, v, f, np.full(8, 5.0), 1e6, 1e6)
     assert len(out.points) == 10
     # the added points lie on the chord, JOIN_TAPER of its length in from each end
     assert np.allclose(out.points[3], [1 + 2 * JOIN_TAPER, 9, 0])
@@ -68,7 +68,7 @@ def test_each_join_gets_a_point_inside_either_end_and_prints_narrow() -> None:
     single, none = narrow_joins(LinkedPath(pts[:3], np.zeros(3, np.int32), linked.bary[:3],
                                            np.zeros((3, 3)), np.ones(3, bool),
                                            np.zeros(3, np.int32), np.zeros(3, np.int32)), v, f,
-                               np.full(3, 5.0), 50.0)
+                               np.full(3, 5.0), 50.0, 4.0)
     assert len(single.points) == 3 and np.all(none == 1.0)
 
 
@@ -109,7 +109,7 @@ def test_the_join_points_follow_the_ramp_along_every_segment() -> None:
     linked = LinkedPath(pts, np.zeros(8, np.int32), np.tile([1.0, 0, 0], (8, 1)),
                         np.zeros((8, 3)), np.ones(8, bool), np.zeros(8, np.int32), piece)
     a = 20.0
-    out, pace = narrow_joins(linked, v, f, np.full(8, 5.0), a)
+    out, pace = narrow_joins(linked, v, f, np.full(8, 5.0), a, 1e6)
     assert len(out.points) == 10
     r = join_ramp(np.array([2.5]), np.array([5.0]), np.array([5.0]), a)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(out.points, axis=0),
