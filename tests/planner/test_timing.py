@@ -183,11 +183,11 @@ def _kept_on_ramps(result: PlanResult, base: float = 5.0) -> float:
 
 def test_the_arm_keeps_a_speed_change_at_the_cells_path_acceleration(
         lines_tp: Toolpath, cell: CellConfig) -> None:
-    # 5 mm/s -> P over 0.5 mm asks P (P - 5) / 0.5 at the top: P = 9.3 mm/s asks the bundled
-    # cell's path acceleration (80 mm/s^2), which the slicer ramps the stripe joins to
+    # 5 mm/s -> P over 0.5 mm asks P (P - 5) / 0.5 at the top: P = 12.8 mm/s asks the bundled
+    # cell's path acceleration (200 mm/s^2), which the slicer ramps the stripe joins to
     # (core.path_accel); 5 -> 100 mm/s over 0.5 mm asks 19,000 mm/s^2
     a = cell.planning.path_accel_mm_s2
-    assert a == pytest.approx(80.0)
+    assert a == pytest.approx(200.0)
     peak = 0.5 * (5.0 + np.sqrt(25.0 + 4.0 * a * 0.5))
     kept = plan(_ramped(lines_tp, peak), cell)
     assert kept.report["path_accel"]["segments_over"] == 0

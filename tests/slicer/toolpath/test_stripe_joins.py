@@ -128,6 +128,14 @@ def test_the_join_points_follow_the_ramp_along_every_segment() -> None:
     assert out.connector_segments().sum() == 7
     # the cell's path acceleration is what the component asks for
     assert bundled_path_accel() > 0
+    # the printing direction turning 0.5 rad along the join (0.2 rad/mm): the wrist turns
+    # with it, and with a turn acceleration of 4 rad/s^2 the join ramps as with a = 20
+    tilt = np.concatenate([[0.0, 0.0], np.linspace(0.0, 0.5, 5), [0.5]])
+    turning = LinkedPath(pts, linked.face, linked.bary,
+                         np.column_stack([np.sin(tilt), np.zeros(8), np.cos(tilt)]),
+                         linked.extrude, linked.path, piece)
+    _, pace_turn = narrow_joins(turning, v, f, np.full(8, 5.0), 1e6, 4.0)
+    assert np.allclose(pace_turn, pace)
 
 
 def test_coverage_miss_is_the_worse_of_gap_and_overlap() -> None:
