@@ -219,9 +219,12 @@ class Component:
             # stripe joins lie half or more over the stripes they join: printed narrow, as
             # fast as the arm follows (the line speed at their ends and the path acceleration)
             v_link = np.zeros(len(linked.points))
+            n_link = np.zeros((len(linked.points), 3))
             on = linked.face >= 0
             v_link[on] = self.values_at(linked.face[on], linked.bary[on], scale)[1]
-            linked, pace = narrow_joins(linked, self.vertices, self.faces, v_link,
+            n_link[on] = point_normals(self.vertex_normals, self.faces, self.normals,
+                                       linked.face[on], linked.bary[on])
+            linked, pace = narrow_joins(linked, self.vertices, self.faces, v_link, n_link,
                                         self.path_accel, self.turn_accel)
         return Built(lines, linked, self._waypoints(linked, scale, pace), scale=scale)
 

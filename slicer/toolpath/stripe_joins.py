@@ -92,15 +92,16 @@ def locate(points: NDArray[np.float64], vertices: NDArray[np.float64],
 
 
 def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArray[np.int32],
-                 speed: NDArray[np.float64], accel: float, turn_accel: float
-                 ) -> tuple[LinkedPath, NDArray[np.float64]]:
+                 speed: NDArray[np.float64], normal: NDArray[np.float64], accel: float,
+                 turn_accel: float) -> tuple[LinkedPath, NDArray[np.float64]]:
     """``linked`` with a point added at the top of each end's speed ramp of every join (a
     run of connector segments, ``LinkedPath.connector_segments``; ``join_ramp``), and the
     (N',) float64 pace of every point: its speed over the line speed there, 1 on the
     lines, rising linearly in arc length along each ramp to the join's pace. ``speed``
-    (N,) mm/s is the line speed at each point of ``linked``; ``accel`` mm/s^2 and
-    ``turn_accel`` rad/s^2 give each join its path acceleration from the turn of the
-    printing direction (``linked.normal``) along it (``core.path_accel.path_accel``). The
+    (N,) mm/s is the line speed and ``normal`` (N, 3) the printing direction at each
+    point of ``linked`` (zero rows: unknown); ``accel`` mm/s^2 and ``turn_accel`` rad/s^2
+    give each join its path acceleration from the turn of the printing direction along it
+    (``core.path_accel.path_accel``). The
     added points lie on the layer (``vertices``
     (n, 3) mm, ``faces`` (m, 3)): the point nearest to the join's line there, with its
     face and barycentrics. A line end keeps its width, so the line's last segment is not
@@ -123,8 +124,8 @@ def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArr
     keep = length > 0
     first, last, length = first[keep], last[keep], length[keep]
     # the printing direction's turn per mm along each join: the wrist turns with it
-    norm = np.linalg.norm(linked.normal, axis=1)
-    nrm = linked.normal / np.maximum(norm, tol.zero)[:, None]
+    norm = np.linalg.norm(normal, axis=1)
+    nrm = normal / np.maximum(norm, tol.zero)[:, None]
     turn = np.where((norm[1:] > tol.zero) & (norm[:-1] > tol.zero), np.arccos(np.clip(
         np.einsum("ij,ij->i", nrm[1:], nrm[:-1]), -1.0, 1.0)), 0.0)
     turned = np.concatenate([[0.0], np.cumsum(turn)])

@@ -30,6 +30,11 @@ from tests.slicer.toolpath.pattern_meshes import disc, flat_mesh
 PROFILE = load_profile("ecoflex-0030")
 
 
+def up(n: int) -> NDArray[np.float64]:
+    """(n, 3) printing directions, all +z."""
+    return np.tile([0.0, 0.0, 1.0], (n, 1))
+
+
 def _square() -> tuple[NDArray[np.float64], NDArray[np.int32]]:
     """A flat 10 mm square, edges about 1 mm."""
     x = np.linspace(0.0, 10.0, 11)
@@ -49,7 +54,7 @@ def test_each_join_gets_a_point_inside_either_end_and_prints_narrow() -> None:
                         np.zeros((8, 3)), np.ones(8, bool), path, piece)
     # an arm that follows any speed change: the join prints at 1 / JOIN_SCALE x the speed
     # between its tapers
-    out, pace = narrow_joins(linked, v, f, np.full(8, 5.0), 1e6, 1e6)
+    out, pace = narrow_joins(linked, v, f, np.full(8, 5.0), up(8), 1e6, 1e6)
     assert len(out.points) == 10
     # the added points lie on the chord, JOIN_TAPER of its length in from each end
     assert np.allclose(out.points[3], [1 + 2 * JOIN_TAPER, 9, 0])
@@ -68,7 +73,7 @@ def test_each_join_gets_a_point_inside_either_end_and_prints_narrow() -> None:
     single, none = narrow_joins(LinkedPath(pts[:3], np.zeros(3, np.int32), linked.bary[:3],
                                            np.zeros((3, 3)), np.ones(3, bool),
                                            np.zeros(3, np.int32), np.zeros(3, np.int32)), v, f,
-                               np.full(3, 5.0), 50.0, 4.0)
+                               np.full(3, 5.0), up(3), 50.0, 4.0)
     assert len(single.points) == 3 and np.all(none == 1.0)
 
 
@@ -109,7 +114,7 @@ def test_the_join_points_follow_the_ramp_along_every_segment() -> None:
     linked = LinkedPath(pts, np.zeros(8, np.int32), np.tile([1.0, 0, 0], (8, 1)),
                         np.zeros((8, 3)), np.ones(8, bool), np.zeros(8, np.int32), piece)
     a = 20.0
-    out, pace = narrow_joins(linked, v, f, np.full(8, 5.0), a, 1e6)
+    out, pace = narrow_joins(linked, v, f, np.full(8, 5.0), up(8), a, 1e6)
     assert len(out.points) == 10
     r = join_ramp(np.array([2.5]), np.array([5.0]), np.array([5.0]), a)
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(out.points, axis=0),
@@ -131,10 +136,8 @@ def test_the_join_points_follow_the_ramp_along_every_segment() -> None:
     # the printing direction turning 0.5 rad along the join (0.2 rad/mm): the wrist turns
     # with it, and with a turn acceleration of 4 rad/s^2 the join ramps as with a = 20
     tilt = np.concatenate([[0.0, 0.0], np.linspace(0.0, 0.5, 5), [0.5]])
-    turning = LinkedPath(pts, linked.face, linked.bary,
-                         np.column_stack([np.sin(tilt), np.zeros(8), np.cos(tilt)]),
-                         linked.extrude, linked.path, piece)
-    _, pace_turn = narrow_joins(turning, v, f, np.full(8, 5.0), 1e6, 4.0)
+    turning = np.column_stack([np.sin(tilt), np.zeros(8), np.cos(tilt)])
+    _, pace_turn = narrow_joins(linked, v, f, np.full(8, 5.0), turning, 1e6, 4.0)
     assert np.allclose(pace_turn, pace)
 
 
