@@ -6,10 +6,10 @@ reaches a speed change only as fast as its joint accelerations allow, and where 
 direction turns along the path (a U-turn at the curved rim of a layer) the wrist turns with it,
 so there far less than on a path that keeps its direction (``path_accel``). The values are cell
 settings: they live in the cell file (``[planning] path_accel_mm_s2``,
-``path_turn_accel_rad_s2``); the slicer shapes its
-speed ramps to the bundled cell's (``bundled_path_accel``), and the planner reports the
-toolpath segments that ask more than the job's cell gives (``plan.path_accel`` in
-report.json, ``planner.flow.asked_acceleration``).
+``path_turn_accel_rad_s2``); the slicer shapes its speed ramps to the bundled cell's
+(``bundled_path_accel``, ``bundled_turn_accel``), and the planner reports the toolpath
+segments that ask more than the job's cell gives on a path that keeps its direction
+(``plan.path_accel`` in report.json, ``planner.flow.asked_acceleration``).
 """
 
 from __future__ import annotations

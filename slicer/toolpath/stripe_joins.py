@@ -1,4 +1,4 @@
-"""Stripe joins printed at half width, and stripe ends at the rim a quarter width inside it.
+"""Stripe joins printed narrower, and stripe ends at the rim a quarter width inside it.
 
 The stripe ordering joins line ends into chains (``ordering._order_cover``): U-turns along
 the boundary, and inside the layer joins from a stripe that ends at a branch point (or a
@@ -11,8 +11,8 @@ stripe stays bare). Joins therefore print at down to JOIN_SCALE x the width (the
 speed sets it, W = C / (H v)): as fast as the arm gets there and back along the join with the
 cell's path acceleration (``join_ramp``, ``core.path_accel``: a short join, a U-turn where
 the wrist turns with the path, prints wider rather than faster than the arm can follow),
-and an open stripe end at the boundary stops JOIN_SCALE x W / 2 inside
-it (``RIM_INSET``), so that the narrow U-turn's band ends at the boundary: the path runs
+and an open stripe end at the boundary stops JOIN_SCALE x W / 2 inside it (``RIM_INSET``),
+so that the narrow U-turn's band ends at the boundary: the path runs
 on without a new extrusion start, and the ink goes to the lines. Where the lines then lie
 closer than their width (spots no stripe reaches, e.g. between holes and the edge), the
 component is also built with full-width joins and keeps the one whose worse of gap and
@@ -101,11 +101,9 @@ def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArr
     (N,) mm/s is the line speed and ``normal`` (N, 3) the printing direction at each
     point of ``linked`` (zero rows: unknown); ``accel`` mm/s^2 and ``turn_accel`` rad/s^2
     give each join its path acceleration from the turn of the printing direction along it
-    (``core.path_accel.path_accel``). The
-    added points lie on the layer (``vertices``
-    (n, 3) mm, ``faces`` (m, 3)): the point nearest to the join's line there, with its
-    face and barycentrics. A line end keeps its width, so the line's last segment is not
-    tapered.
+    (``core.path_accel.path_accel``). The added points lie on the layer (``vertices`` (n, 3)
+    mm, ``faces`` (m, 3)): the point nearest to the join's line there, with its face and
+    barycentrics. A line end keeps its width, so the line's last segment is not tapered.
     """
     n = len(linked.points)
     pace = np.ones(n)
