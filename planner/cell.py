@@ -223,6 +223,8 @@ class PlanningConfig:
     travel_speed_mm_s: float = _CELL["planning"]["travel_speed_mm_s"]
     transfer_speed_mm_s: float = _CELL["planning"]["transfer_speed_mm_s"]
     approach_above_gel_mm: float = _CELL["planning"]["approach_above_gel_mm"]
+    path_accel_mm_s2: float = _CELL["planning"]["path_accel_mm_s2"]
+    path_turn_accel_rad_s2: float = _CELL["planning"]["path_turn_accel_rad_s2"]
 
     @property
     def alpha_range(self) -> AlphaRange:
@@ -247,6 +249,8 @@ class PlanningConfig:
             raise ValueError("max_step_mm and travel_speed_mm_s must be positive")
         if self.approach_above_gel_mm <= 0 or self.transfer_speed_mm_s <= 0:
             raise ValueError("approach_above_gel_mm and transfer_speed_mm_s must be positive")
+        if self.path_accel_mm_s2 <= 0 or self.path_turn_accel_rad_s2 <= 0:
+            raise ValueError("path_accel_mm_s2 and path_turn_accel_rad_s2 must be positive")
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,9 @@ the arm's speed to the toolpath's, so the ink per millimetre and the filament st
 slicer asked for. This module says what that ratio is, per toolpath segment
 (``segment_speeds``) and per trajectory sample (``knot_flow_scale``); the robot node streams it
 to the extruder (``mesp_cell.nodes.robot_node``) and the virtual print of the plan
-(``sim.as_planned``) deposits with it.
+(``sim.as_planned``) deposits with it. ``asked_acceleration`` says where the toolpath's own
+speed changes ask more of the arm than the cell's path acceleration, which the slicer shapes
+them to (``core.path_accel``).
 """
 
 from __future__ import annotations
@@ -26,6 +28,9 @@ from core.tolerance import tol
 # the lowest scale commanded: the arm stopping dead (a U-turn) still gets a trickle, so the
 # extruder's screw keeps its pressure (its flow response is first order, tau ~0.2 s)
 MIN_FLOW_SCALE = 0.02
+# a toolpath segment asking at most this fraction more than the cell's path acceleration is
+# not counted as asking more (``asked_acceleration``)
+ASKED_SLACK = 0.01
 
 
 class Timed(Protocol):
@@ -93,6 +98,23 @@ def segment_speeds(toolpath: Toolpath, trajectory: Timed) -> PlannedSpeeds:
                          target_duration=target_duration)
 
 
+
+
+def asked_acceleration(toolpath: Toolpath) -> NDArray[np.float64]:
+    """(N - 1,) float64, mm/s^2, per toolpath segment, the largest nozzle acceleration its
+    speed change asks for at the toolpath's speeds: the speed varies linearly along the
+    segment, so v dv/dx peaks at the faster end, max(v0, v1) |v1 - v0| / L; 0 on segments
+    that do not deposit or have no length. The slicer ramps its speed changes to the cell's
+    ``path_accel_mm_s2`` (``core.path_accel``); a segment asking more is where the arm may
+    fall behind the toolpath's speed (``plan_report``)."""
+    if len(toolpath) < 2:
+        return np.zeros(0)
+    v = toolpath.speed
+    length = np.linalg.norm(np.diff(toolpath.position, axis=0), axis=1)
+    live = (toolpath.extrude[1:] & toolpath.extrude[:-1]
+            & (toolpath.path[1:] == toolpath.path[:-1]) & (length > tol.zero))
+    acc = np.maximum(v[1:], v[:-1]) * np.abs(np.diff(v)) / np.maximum(length, tol.zero)
+    return np.where(live, acc, 0.0)
 
 
 def knot_flow_scale(toolpath: Toolpath, trajectory: Timed,

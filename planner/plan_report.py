@@ -18,6 +18,7 @@ from core.tolerance import tol
 from planner import kinematics as kin
 from planner.cell import CellConfig
 from planner.entry import TRANSFER, SafeMove
+from planner.flow import ASKED_SLACK, asked_acceleration
 from planner.orientation import Orientation
 from planner.placement import Placement
 from planner.reach import COLLISION, OK, REASONS, Reach
@@ -180,6 +181,7 @@ def plan_report(
     planned = step[ex_step] / np.maximum(target_step[ex_step], tol.zero)
     extra = np.maximum(dt[ex_step] - planned, 0.0) * C
     slowed = ratio < 0.95
+    asked = asked_acceleration(toolpath)
     q_deg = np.degrees(traj.q)
     lo, hi = np.array(cell.robot.joint_min_deg), np.array(cell.robot.joint_max_deg)
     acc = np.abs(np.diff(traj.qd, axis=0)) / np.maximum(dt, tol.zero)[:, None]
@@ -221,6 +223,12 @@ def plan_report(
                         "within_5pct_length": float(
                             np.sum(step[ex_step] * (np.abs(ratio - 1) <= 0.05))
                             / max(float(step[ex_step].sum()), tol.zero)) if len(ratio) else 1.0},
+        # the speed changes the toolpath asks for against the acceleration the cell gives
+        # the slicer for them (``flow.asked_acceleration``)
+        "path_accel": {"limit_mm_s2": cell.planning.path_accel_mm_s2,
+                       "segments_over": int(np.sum(asked > cell.planning.path_accel_mm_s2
+                                                   * (1.0 + ASKED_SLACK))),
+                       "max_asked_mm_s2": float(asked.max()) if len(asked) else 0.0},
         "over_deposition": {
             "volume_mm3": float(extra.sum()),
             "fraction": float(extra.sum() / max(C * planned.sum(), tol.zero)),

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from core.path_accel import bundled_path_accel, bundled_turn_accel
 from core.stages import LayerMesh, Pattern
 from core.tolerance import tol
 from slicer.config import ToolpathConfig
@@ -33,7 +34,7 @@ from slicer.toolpath.resample import (
     resample_lines,
 )
 from slicer.toolpath.results import Waypoints
-from slicer.toolpath.stripe_joins import JOIN_SCALE, RIM_INSET, narrow_joins
+from slicer.toolpath.stripe_joins import RIM_INSET, narrow_joins
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
 TINY_LOOP = 2.0  # closed lines shorter than this x W are dropped (a blob, not a loop)
@@ -110,6 +111,8 @@ class Component:
         self.pattern = pattern
         self.cfg = cfg
         self.profile = profile
+        # mm/s^2 and rad/s^2: the speed changes the cell's arm follows (``core.path_accel``)
+        self.path_accel, self.turn_accel = bundled_path_accel(), bundled_turn_accel()
         self.width = profile.width(self.height)
         # the profile table's speeds: a width scaled by the speed stays within them
         self.v_lo, self.v_hi = (float(x) for x in profile.speed_for_height(
@@ -211,24 +214,33 @@ class Component:
         linked = link_pieces(lines, pieces, self.vertices, self.faces, self.graph, w_rs,
                              lifter, lift, factor, joiner,
                              spiral=self.cfg.spiral_rings and level is not None)
-        thin = None
+        pace = None
         if level is None and trim_distance is not None and narrow_on:
-            # stripe joins lie half or more over the stripes they join: printed narrow
-            linked, thin = narrow_joins(linked, self.vertices, self.faces)
-        return Built(lines, linked, self._waypoints(linked, scale, thin), scale=scale)
+            # stripe joins lie half or more over the stripes they join: printed narrow, as
+            # fast as the arm follows (the line speed at their ends and the path acceleration)
+            v_link = np.zeros(len(linked.points))
+            n_link = np.zeros((len(linked.points), 3))
+            on = linked.face >= 0
+            v_link[on] = self.values_at(linked.face[on], linked.bary[on], scale)[1]
+            n_link[on] = point_normals(self.vertex_normals, self.faces, self.normals,
+                                       linked.face[on], linked.bary[on])
+            linked, pace = narrow_joins(linked, self.vertices, self.faces, v_link, n_link,
+                                        self.path_accel, self.turn_accel)
+        return Built(lines, linked, self._waypoints(linked, scale, pace), scale=scale)
 
     def _waypoints(self, linked: LinkedPath, scale: NDArray[np.float64] | None = None,
-                   narrow: NDArray[np.bool_] | None = None) -> Waypoints:
-        """Process values at the linked points; ``narrow`` (N,) bool: points of joins
-        printed at JOIN_SCALE x their width (``stripe_joins``: the speed sets it)."""
+                   pace: NDArray[np.float64] | None = None) -> Waypoints:
+        """Process values at the linked points; ``pace`` (N,) float64: the speed over the
+        line speed each point prints at, its width divided by it (``stripe_joins``: joins
+        print narrower, down to JOIN_SCALE x the width)."""
         n = len(linked.points)
         h, v, w = np.zeros(n), np.zeros(n), np.zeros(n)
         normal = linked.normal.copy()
         on = linked.face >= 0
         h[on], v[on], w[on] = self.values_at(linked.face[on], linked.bary[on], scale)
-        if narrow is not None and narrow.any():
-            thin = narrow & on
-            fast = self.flowed_speed(v[thin], JOIN_SCALE, self.profile.speed_at(h[thin]))
+        if pace is not None and np.any(pace > 1.0):
+            thin = (pace > 1.0) & on
+            fast = self.flowed_speed(v[thin], 1.0 / pace[thin], self.profile.speed_at(h[thin]))
             w[thin] *= v[thin] / fast
             v[thin] = fast
         normal[on] = point_normals(self.vertex_normals, self.faces, self.normals,

@@ -1,4 +1,4 @@
-"""Stripe joins printed at half width, and stripe ends at the rim a quarter width inside it.
+"""Stripe joins printed narrower, and stripe ends at the rim a quarter width inside it.
 
 The stripe ordering joins line ends into chains (``ordering._order_cover``): U-turns along
 the boundary, and inside the layer joins from a stripe that ends at a branch point (or a
@@ -7,9 +7,12 @@ or more on the stripes it joins: a U-turn's chord between two stripe ends half a
 inside the boundary covers the last half width of both stripes again (about W^2 / 2 per
 turn), an inside join runs over the stripes beside it. That ink is laid twice, and the
 volume match takes it from every line of the layer (spacing tau > 1: a strip along every
-stripe stays bare). Joins therefore print at JOIN_SCALE x the width (the nozzle speed sets
-it, W = C / (H v)), and an open stripe end at the boundary stops JOIN_SCALE x W / 2 inside
-it (``RIM_INSET``), so that the narrow U-turn's band ends at the boundary: the path runs
+stripe stays bare). Joins therefore print at down to JOIN_SCALE x the width (the nozzle
+speed sets it, W = C / (H v)): as fast as the arm gets there and back along the join with the
+cell's path acceleration (``join_ramp``, ``core.path_accel``: a short join, a U-turn where
+the wrist turns with the path, prints wider rather than faster than the arm can follow),
+and an open stripe end at the boundary stops JOIN_SCALE x W / 2 inside it (``RIM_INSET``),
+so that the narrow U-turn's band ends at the boundary: the path runs
 on without a new extrusion start, and the ink goes to the lines. Where the lines then lie
 closer than their width (spots no stripe reaches, e.g. between holes and the edge), the
 component is also built with full-width joins and keeps the one whose worse of gap and
@@ -18,9 +21,12 @@ overlap (``coverage_miss``) is smaller (``strategy``).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numpy.typing import NDArray
 
+from core.path_accel import path_accel
 from core.stages import Layers, Pattern, Toolpath
 from core.tolerance import tol
 from slicer.toolpath.coverage import layer_coverage
@@ -28,10 +34,50 @@ from slicer.toolpath.layer_nearest import inside_barycentric, nearest_on_layer
 from slicer.toolpath.linking import LinkedPath
 from slicer.toolpath.results import Waypoints
 
-JOIN_SCALE = 0.5  # width of a join over the width of the lines it joins
+JOIN_SCALE = 0.5  # width of a join over the width of the lines it joins (at most)
 RIM_INSET = 0.5 * JOIN_SCALE  # x W: how far inside the boundary an open stripe end stops
-JOIN_TAPER = 0.1  # x the join's length: where its narrow part starts and ends
+JOIN_TAPER = 0.1  # x the join's length: where its narrow part starts and ends, at least
+RAMP_SHARE = 0.45  # x the join's length: the longest speed ramp at either end
 NEAREST_FACES = 8  # candidate faces when locating an added point on the layer
+# the largest r (r - 1) of a join's peak speed r x the lines' (r = 1 / JOIN_SCALE)
+PACE_MAX = (1.0 / JOIN_SCALE) * (1.0 / JOIN_SCALE - 1.0)
+
+
+class JoinRamp(NamedTuple):
+    """How fast a join prints: per join, (J,) float64 each.
+
+    pace: the join's peak speed over the lines' (1 to 1 / JOIN_SCALE): its width is the
+        lines' over this (W = C / (H v)).
+    ramp_a, ramp_b: mm, the lengths over which the speed rises linearly from the line's
+        at the join's start to the peak, and falls from it to the line's at its end.
+    """
+
+    pace: NDArray[np.float64]
+    ramp_a: NDArray[np.float64]
+    ramp_b: NDArray[np.float64]
+
+
+def join_ramp(length: NDArray[np.float64], v_a: NDArray[np.float64],
+              v_b: NDArray[np.float64], accel: NDArray[np.float64] | float) -> JoinRamp:
+    """The fastest join an arm with the path acceleration ``accel`` (mm/s^2, per join or
+    one for all, ``core.path_accel``) follows: joins of ``length`` (J,) mm between line
+    ends printed at ``v_a`` and ``v_b`` (J,) mm/s.
+
+    The speed rises linearly in arc length over ``ramp_a`` from v_a to pace x v_a (and falls
+    likewise to v_b): the acceleration v dv/dx is largest at the top, pace (pace - 1) v_a^2
+    / ramp_a, and is held to ``accel``. With both ramps at most RAMP_SHARE of the length,
+    a short join prints wider and slower than a long one (a join of length L between ends
+    at v reaches at most (v + sqrt(v^2 + 4 RAMP_SHARE accel L)) / 2 < sqrt(v^2 + 2
+    RAMP_SHARE accel L)); a long one at 1 / JOIN_SCALE x the lines' speed, ramped over at
+    least JOIN_TAPER of its length.
+    """
+    v_top = np.maximum(np.maximum(v_a, v_b), tol.zero)
+    g = np.clip(accel * RAMP_SHARE * length / v_top ** 2, 0.0, PACE_MAX)  # pace (pace - 1)
+    pace = 0.5 * (1.0 + np.sqrt(1.0 + 4.0 * g))
+    floor = JOIN_TAPER * length
+    ramp_a = np.clip(g * v_a ** 2 / accel, floor, RAMP_SHARE * length)
+    ramp_b = np.clip(g * v_b ** 2 / accel, floor, RAMP_SHARE * length)
+    return JoinRamp(pace, ramp_a, ramp_b)
 
 
 def locate(points: NDArray[np.float64], vertices: NDArray[np.float64],
@@ -45,49 +91,60 @@ def locate(points: NDArray[np.float64], vertices: NDArray[np.float64],
     return np.einsum("pk,pkj->pj", bary, vertices[faces[face]]), face, bary
 
 
-def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArray[np.int32]
-                 ) -> tuple[LinkedPath, NDArray[np.bool_]]:
-    """``linked`` with a point added just inside each end of every join (a run of
-    connector segments, ``LinkedPath.connector_segments``), and the (N',) bool mask of the
-    points that print narrow: those added and the join's own points between them. The
-    added points lie on the layer (``vertices`` (n, 3) mm, ``faces`` (m, 3)): the point
-    nearest to the join's line there, with its face and barycentrics.
-
-    A line end keeps its width, so the line's last segment is not tapered; the join's
-    short first and last parts (JOIN_TAPER of its length) taper from the line's width to
-    the narrow one.
+def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArray[np.int32],
+                 speed: NDArray[np.float64], normal: NDArray[np.float64], accel: float,
+                 turn_accel: float) -> tuple[LinkedPath, NDArray[np.float64]]:
+    """``linked`` with a point added at the top of each end's speed ramp of every join (a
+    run of connector segments, ``LinkedPath.connector_segments``; ``join_ramp``), and the
+    (N',) float64 pace of every point: its speed over the line speed there, 1 on the
+    lines, rising linearly in arc length along each ramp to the join's pace. ``speed``
+    (N,) mm/s is the line speed and ``normal`` (N, 3) the printing direction at each
+    point of ``linked`` (zero rows: unknown); ``accel`` mm/s^2 and ``turn_accel`` rad/s^2
+    give each join its path acceleration from the turn of the printing direction along it
+    (``core.path_accel.path_accel``). The added points lie on the layer (``vertices`` (n, 3)
+    mm, ``faces`` (m, 3)): the point nearest to the join's line there, with its face and
+    barycentrics. A line end keeps its width, so the line's last segment is not tapered.
     """
     n = len(linked.points)
-    narrow = np.zeros(n, dtype=bool)
+    pace = np.ones(n)
     if n < 2:
-        return linked, narrow
+        return linked, pace
     conn = linked.connector_segments()
     edge = np.diff(np.concatenate([[0], conn.astype(np.int8), [0]]))
     first = np.flatnonzero(edge == 1)  # run of connector segments from point first ...
     last = np.flatnonzero(edge == -1)  # ... to point last
     if len(first) == 0:
-        return linked, narrow
+        return linked, pace
     p = linked.points
     step = np.linalg.norm(np.diff(p, axis=0), axis=1)
     arc = np.concatenate([[0.0], np.cumsum(step)])
     length = arc[last] - arc[first]
     keep = length > 0
     first, last, length = first[keep], last[keep], length[keep]
-    # the added points: JOIN_TAPER of the join's length in from each end, on its first
-    # and last segment (at most half of either)
-    d_a = np.minimum(JOIN_TAPER * length, 0.5 * step[first])
-    d_b = np.minimum(JOIN_TAPER * length, 0.5 * step[last - 1])
-    u_a = (p[first + 1] - p[first]) / np.maximum(step[first], 1e-300)[:, None]
-    u_b = (p[last] - p[last - 1]) / np.maximum(step[last - 1], 1e-300)[:, None]
-    new_a = p[first] + d_a[:, None] * u_a
-    new_b = p[last] - d_b[:, None] * u_b
-    # inserted after point first and before point last (np.insert keeps the given order
-    # for equal positions, so a one-segment join gets a then b)
-    where = np.concatenate([first + 1, last])
+    # the printing direction's turn per mm along each join: the wrist turns with it
+    norm = np.linalg.norm(normal, axis=1)
+    nrm = normal / np.maximum(norm, tol.zero)[:, None]
+    turn = np.where((norm[1:] > tol.zero) & (norm[:-1] > tol.zero), np.arccos(np.clip(
+        np.einsum("ij,ij->i", nrm[1:], nrm[:-1]), -1.0, 1.0)), 0.0)
+    turned = np.concatenate([[0.0], np.cumsum(turn)])
+    rate = (turned[last] - turned[first]) / length
+    ramp = join_ramp(length, speed[first], speed[last], path_accel(rate, accel, turn_accel))
+    # the added points: at the top of either ramp, on the segment of the join that holds it
+    at_a = arc[first] + ramp.ramp_a
+    at_b = arc[last] - ramp.ramp_b
+    seg_a = np.clip(np.searchsorted(arc, at_a, side="right") - 1, first, last - 1)
+    seg_b = np.clip(np.searchsorted(arc, at_b, side="right") - 1, first, last - 1)
+    seg = np.concatenate([seg_a, seg_b])
+    along = np.concatenate([at_a, at_b]) - arc[seg]
+    u = (p[seg + 1] - p[seg]) / np.maximum(step[seg], 1e-300)[:, None]
+    new = p[seg] + along[:, None] * u
+    # inserted after the start of their segment (np.insert keeps the given order for equal
+    # positions, so a's come before b's on a shared segment)
+    where = seg + 1
     order = np.argsort(where, kind="stable")
     where = where[order]
     src = np.concatenate([first, last])[order]  # the line end each added point copies
-    added, face, bary = locate(np.concatenate([new_a, new_b])[order], vertices, faces)
+    added, face, bary = locate(new[order], vertices, faces)
     points = np.insert(p, where, added, axis=0)
     out = LinkedPath(
         points=points,
@@ -98,16 +155,25 @@ def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArr
         path=np.insert(linked.path, where, linked.path[src]),
         piece=np.insert(linked.piece, where, np.full(len(src), -1, dtype=np.int32)),
     )
-    # new index of every old point, then the span of each join (its own interior points
-    # and the two added ones) is narrow
+    # new index of every old point; each point of a join's span (its ends, interior and
+    # added points) gets its join's number, and its pace from its arc length along it
     shift = np.zeros(n + 1, dtype=np.int64)
     np.add.at(shift, where, 1)
     new_index = np.arange(n) + np.cumsum(shift)[:n]
+    start, stop = new_index[first], new_index[last]
     mark = np.zeros(len(points) + 1, dtype=np.int64)
-    np.add.at(mark, new_index[first] + 1, 1)
-    np.add.at(mark, new_index[last], -1)
-    narrow_new = np.cumsum(mark)[:-1] > 0
-    return out, narrow_new
+    np.add.at(mark, start + 1, 1)
+    np.add.at(mark, stop, -1)
+    inside = np.cumsum(mark)[:-1] > 0
+    join = np.searchsorted(start, np.arange(len(points)), side="right") - 1
+    new_arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0),
+                                                              axis=1))])
+    k = join[inside]
+    x = new_arc[inside] - new_arc[start[k]]
+    rise = np.minimum(np.minimum(x / ramp.ramp_a[k], (length[k] - x) / ramp.ramp_b[k]), 1.0)
+    pace_new = np.ones(len(points))
+    pace_new[inside] = 1.0 + (ramp.pace[k] - 1.0) * np.clip(rise, 0.0, 1.0)
+    return out, pace_new
 
 
 def coverage_miss(vertices: NDArray[np.float64], faces: NDArray[np.int32],

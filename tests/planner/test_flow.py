@@ -7,7 +7,7 @@ import pytest
 
 from core.errors import InputError
 from core.stages import Toolpath
-from planner.flow import MIN_FLOW_SCALE, knot_flow_scale, segment_speeds
+from planner.flow import MIN_FLOW_SCALE, asked_acceleration, knot_flow_scale, segment_speeds
 from planner.trajectory import Trajectory
 from tests.planner.synthetic import make_toolpath
 
@@ -52,3 +52,21 @@ def test_a_trajectory_of_another_toolpath_is_refused() -> None:
     short = make_toolpath(tp.position[:6], tp.normal[:6], tp.path[:6])
     with pytest.raises(InputError, match="another toolpath"):
         knot_flow_scale(short, tr)
+
+
+def test_asked_acceleration_peaks_at_the_faster_end_of_a_speed_change() -> None:
+    # speed linear in arc length from v0 to v1 over L: v dv/dx = v (v1 - v0) / L, largest
+    # at the faster end; nothing on a move between paths or a segment of no length
+    tp, _ = _two_paths()
+    speed = np.full(10, 10.0)
+    speed[2], speed[7] = 20.0, 4.0  # segments 1, 2 (path 0) and 6, 7 (path 1): 1 mm each
+    extrude = np.ones(10, bool)
+    tp = Toolpath(position=tp.position, normal=tp.normal, layer=tp.layer, path=tp.path,
+                  height=tp.height, width=tp.width, speed=speed, extrude=extrude,
+                  pattern=tp.pattern)
+    acc = asked_acceleration(tp)
+    expect = np.zeros(9)
+    expect[[1, 2]] = 20.0 * 10.0 / 1.0
+    expect[[6, 7]] = 10.0 * 6.0 / 1.0
+    assert acc == pytest.approx(expect)
+    assert acc[4] == 0.0  # the move between the paths (2 mm, other path id)

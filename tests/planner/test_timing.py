@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pytest
 
 from core.stages import Toolpath
 from planner.cell import CellConfig
@@ -161,3 +162,38 @@ def test_rates_at_a_junction_come_from_its_depositing_side() -> None:
     assert central[5, 2] > 0.4  # the central difference sees half the move's turn
     assert np.allclose(one[5], 0.0)  # the arriving (depositing) step turns nothing
     assert np.allclose(one[np.r_[0:5, 6:10]], central[np.r_[0:5, 6:10]])
+
+
+def _ramped(tp: Toolpath, peak: float, base: float = 5.0) -> Toolpath:
+    """``tp`` (straight lines, waypoints 0.5 mm apart) at ``base`` mm/s, at ``peak`` between
+    x = 10.5 and 19.5 mm of each line: the speed ramps over one 0.5 mm segment each way."""
+    x = tp.position[:, 0]
+    speed = np.where((x > 10.25) & (x < 19.75), peak, base)
+    return dataclasses.replace(tp, speed=speed, width=6.57 / (tp.height * speed))
+
+
+def _kept_on_ramps(result: PlanResult, base: float = 5.0) -> float:
+    """Share of the extruding steps at or above 1.1 x ``base`` kept within 5 %."""
+    tr, sm = result.trajectory, result.samples
+    v = np.linalg.norm(np.diff(tr.tcp, axis=0), axis=1) / np.diff(tr.t)
+    target = 0.5 * (sm.speed[:-1] + sm.speed[1:])
+    on = tr.extrude[:-1] & (target >= 1.1 * base)
+    return float(np.mean(np.abs(v[on] / target[on] - 1.0) <= 0.05))
+
+
+def test_the_arm_keeps_a_speed_change_at_the_cells_path_acceleration(
+        lines_tp: Toolpath, cell: CellConfig) -> None:
+    # 5 mm/s -> P over 0.5 mm asks P (P - 5) / 0.5 at the top: P = 12.8 mm/s asks the bundled
+    # cell's path acceleration (200 mm/s^2), which the slicer ramps the stripe joins to
+    # (core.path_accel); 5 -> 100 mm/s over 0.5 mm asks 19,000 mm/s^2
+    a = cell.planning.path_accel_mm_s2
+    assert a == pytest.approx(200.0)
+    peak = 0.5 * (5.0 + np.sqrt(25.0 + 4.0 * a * 0.5))
+    kept = plan(_ramped(lines_tp, peak), cell)
+    assert kept.report["path_accel"]["segments_over"] == 0
+    assert kept.report["path_accel"]["max_asked_mm_s2"] == pytest.approx(a)
+    assert _kept_on_ramps(kept) >= 0.98
+    _limits_hold(kept, cell)
+    steep = plan(_ramped(lines_tp, 100.0), cell)
+    assert steep.report["path_accel"]["segments_over"] == 6  # up and down on each line
+    assert _kept_on_ramps(steep) < 0.9

@@ -1,0 +1,40 @@
+"""The nozzle acceleration a toolpath may ask for where its speed changes within a path.
+
+The slicer changes the nozzle speed inside a path where it changes the width (W = C / (H v)):
+the stripe joins print narrower, so faster (``slicer.toolpath.stripe_joins``). The arm
+reaches a speed change only as fast as its joint accelerations allow, and where the printing
+direction turns along the path (a U-turn at the curved rim of a layer) the wrist turns with it,
+so there far less than on a path that keeps its direction (``path_accel``). The values are cell
+settings: they live in the cell file (``[planning] path_accel_mm_s2``,
+``path_turn_accel_rad_s2``); the slicer shapes its speed ramps to the bundled cell's
+(``bundled_path_accel``, ``bundled_turn_accel``), and the planner reports the toolpath
+segments that ask more than the job's cell gives on a path that keeps its direction
+(``plan.path_accel`` in report.json, ``planner.flow.asked_acceleration``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from core.toml_defaults import table
+
+
+def bundled_path_accel() -> float:
+    """mm/s^2, the path acceleration of the bundled cell (``planner/cells/default.toml``)."""
+    return float(table("planner", "cells/default.toml", "planning")["path_accel_mm_s2"])
+
+
+def bundled_turn_accel() -> float:
+    """rad/s^2, the bundled cell's tool turn acceleration: along a path whose printing
+    direction turns by k rad/mm, a nozzle acceleration a turns the tool at k a rad/s^2, so
+    the path acceleration there is at most this / k."""
+    return float(table("planner", "cells/default.toml", "planning")["path_turn_accel_rad_s2"])
+
+
+def path_accel(turn_rate: NDArray[np.float64], accel: float, turn_accel: float
+               ) -> NDArray[np.float64]:
+    """mm/s^2, the acceleration a speed change may ask for along paths whose printing
+    direction turns by ``turn_rate`` (rad/mm, any shape): ``accel`` (mm/s^2) on a path that
+    keeps its direction, ``turn_accel`` (rad/s^2) / turn_rate where that is less."""
+    return np.minimum(accel, turn_accel / np.maximum(turn_rate, 1e-12))
