@@ -20,6 +20,7 @@ from pathlib import Path
 
 import pytest
 
+from core.errors import InputError
 from mesp_cell.cli import main
 from tests.mesp_cell import synthetic
 
@@ -83,7 +84,10 @@ def test_recalibrated_cell_refuses_a_stale_job_and_prints_the_toolpath_volume(
             fresh = client.submit(cube, fresh_job)
             refused = client.wait(stale.id, timeout=240)
             before = _truth(home)
-            client.confirm_ready(fresh.id, timeout=240)  # the operator confirms the tank
+            try:
+                client.confirm_ready(fresh.id, timeout=240)  # the operator confirms the tank
+            except InputError as exc:  # the job ended before it asked: say why it did
+                raise AssertionError(f"{exc}: {client.status(fresh.id).reason}") from exc
             done = client.wait(fresh.id, timeout=400)
             for _ in range(3):  # a loaded 2-core host may trip an interlock: resume, as a user
                 if done.state != "interrupted":
