@@ -74,9 +74,13 @@ class Console:
         return str(r.json()["id"])
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope="module")
 def console_cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
-    """The cell and its console, started once per test session (see ``console``)."""
+    """The cell and its console, started once per test module (see ``console``).
+
+    Not once per session: a running cell takes about half a core while it waits (its nodes'
+    state loops, heartbeats and twin), and a session's cell waited from the console's tests,
+    which run early (slow files first), to the end of the run, beside the other tests."""
     home = tmp_path_factory.mktemp("console_home")
     old = os.environ.get("MESP_HOME")
     os.environ["MESP_HOME"] = str(home)
@@ -107,7 +111,7 @@ def console_cell(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Console]:
 
 @pytest.fixture
 def console(console_cell: Console) -> Iterator[Console]:
-    """The session's cell and console; after each test, every job it left unfinished is
+    """The module's cell and console; after each test, every job it left unfinished is
     aborted and a latched e-stop cleared, so that one failed test does not hold the queue
     (one job waits at a time) for the tests after it."""
     yield console_cell

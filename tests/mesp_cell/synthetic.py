@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -18,6 +19,7 @@ from core.artifacts import save_npz
 from core.stages import Toolpath
 
 if TYPE_CHECKING:
+    from mesp_cell.cell_client import CellClient
     from mesp_cell.launcher import Launch
 
 HOME = np.radians([0.0, -100.0, 100.0, -90.0, -90.0, 0.0])
@@ -174,3 +176,20 @@ def cell_in_home(home: Path, **overrides: Any) -> Iterator[Launch]:
             os.environ.pop("MESP_HOME", None)
         else:
             os.environ["MESP_HOME"] = old
+
+
+def abort_unfinished(client: CellClient, timeout: float = 30.0) -> None:
+    """Reset a latched e-stop, abort every job of the cell that has not ended and wait until
+    each has: a job a failed test left interrupted holds the tank, and the next test's job
+    would wait in ``planned`` behind it (one failure became four)."""
+    from mesp_cell.jobs import FINAL
+
+    client.reset_estop()
+    left = [j.id for j in client.store.query(client.cell) if j.state not in FINAL]
+    for job_id in left:
+        client.command("abort", job_id)
+    end = time.monotonic() + timeout
+    while left and time.monotonic() < end:
+        left = [j for j in left if client.status(j).state not in FINAL]
+        time.sleep(0.05)
+    assert not left, f"jobs {left} were not aborted within {timeout} s"

@@ -77,9 +77,10 @@ def rec(client: CellClient) -> Recorder:
 
 @pytest.fixture(autouse=True)
 def estop_cleared(client: CellClient) -> Iterator[None]:
-    """A test that fails with the e-stop latched does not take the next tests with it."""
+    """A test that fails with the e-stop latched or a job unfinished does not take the next
+    tests with it."""
     yield
-    client.reset_estop()
+    synthetic.abort_unfinished(client)
 
 
 @pytest.fixture
