@@ -82,11 +82,12 @@ class PrintLoop:
     def _retract(self, job_id: str) -> str:
         """Move home on the robot's checked safe path (retract along the nozzle axis, transfer
         above the gel); returns what happened, for the job's history."""
+        asked = time.time()
         reply = self._request(self.names["robot"], Command.make("move", job_id, to="home"))
         if not reply.ok:
             return f"nozzle not retracted: {reply.reason}"
         try:
-            ev = self._wait_event(job_id, self.timeouts["move"])
+            ev = self._wait_event(job_id, self.timeouts["move"], asked)
         except Stopped as exc:
             return f"nozzle not retracted: {exc}"
         if ev.kind != StreamEnd.MOVED:
@@ -97,7 +98,10 @@ class PrintLoop:
         assert self.bus is not None
         return self.bus.request(node, cmd, timeout)
 
-    def _wait_event(self, job_id: str, timeout: float) -> StreamEvent:
+    def _wait_event(self, job_id: str, timeout: float, since: float = 0.0) -> StreamEvent:
+        """The next end event of ``job_id``'s motion that ended at or after ``since`` (s since
+        the epoch: the request's time; an earlier one is a stale stream end, e.g. the stop
+        of a paused stream, which each repeated stop request may announce again)."""
         end = time.monotonic() + timeout
         while time.monotonic() < end:
             if self.names["robot"] not in self.alive:
@@ -106,7 +110,7 @@ class PrintLoop:
                 ev = self.events.get(timeout=0.05)
             except queue.Empty:
                 continue
-            if ev.job_id == job_id:
+            if ev.job_id == job_id and ev.t >= since:
                 return ev
         raise Stopped(f"robot did not finish within {timeout:g} s")
 
@@ -117,10 +121,11 @@ class PrintLoop:
 
     def _move(self, job_id: str, **args: Any) -> None:
         self._check_request()
+        asked = time.time()
         reply = self._request(self.names["robot"], Command.make("move", job_id, **args))
         if not reply.ok:
             raise Stopped(reply.reason)
-        ev = self._wait_event(job_id, self.timeouts["move"])
+        ev = self._wait_event(job_id, self.timeouts["move"], asked)
         if ev.kind != StreamEnd.MOVED:
             raise Stopped(ev.reason or "move interrupted")
 
@@ -246,12 +251,13 @@ class PrintLoop:
                                 "rate": self.setpoint}
         if end is not None:
             args["end"] = end
+        since = time.time()
         reply = self._request(self.names["robot"], Command.make("stream", job.id, **args))
         if not reply.ok:
             raise Stopped(reply.reason)
         if started is not None:
             started()
-        return self._monitor(job, plan, ext0)
+        return self._monitor(job, plan, ext0, since)
 
     def _checkpoint(self, job: JobRecord, plan: StreamPlan) -> tuple[int, int]:
         """(waypoint, sample) the robot's ledger last printed (-1, -1: nothing yet), recorded
@@ -334,9 +340,11 @@ class PrintLoop:
         kind = StreamEnd.DONE if reply.value("mode") == RobotMode.IDLE else StreamEnd.STOPPED
         return StreamEvent(job_id, kind, why, rs.sample, float(reply.value("stop_t", time.time())))
 
-    def _monitor(self, job: JobRecord, plan: StreamPlan, ext0: float) -> StreamEvent:
-        """Follow the stream (checkpoints, progress) until it ends. The robot node switches
-        the extruder on the servo clock."""
+    def _monitor(self, job: JobRecord, plan: StreamPlan, ext0: float,
+                 since: float = 0.0) -> StreamEvent:
+        """Follow the stream (checkpoints, progress) until it ends (an end event stamped at
+        or after ``since``, the stream request's time: not a stale one). The robot node
+        switches the extruder on the servo clock."""
         assert self.bus is not None
         K = plan.samples
         last_report = 0.0
@@ -358,7 +366,8 @@ class PrintLoop:
                               1.0)
             try:
                 ev = self.events.get(timeout=0.01)
-                if ev.job_id == job.id and ev.kind in (StreamEnd.DONE, StreamEnd.STOPPED):
+                if (ev.job_id == job.id and ev.kind in (StreamEnd.DONE, StreamEnd.STOPPED)
+                        and ev.t >= since):
                     return ev
             except queue.Empty:
                 pass
