@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from core.tolerance import tol
 from core.toml_defaults import table
 
 
@@ -37,4 +38,4 @@ def path_accel(turn_rate: NDArray[np.float64], accel: float, turn_accel: float
     """mm/s^2, the acceleration a speed change may ask for along paths whose printing
     direction turns by ``turn_rate`` (rad/mm, any shape): ``accel`` (mm/s^2) on a path that
     keeps its direction, ``turn_accel`` (rad/s^2) / turn_rate where that is less."""
-    return np.minimum(accel, turn_accel / np.maximum(turn_rate, 1e-12))
+    return np.minimum(accel, turn_accel / np.maximum(turn_rate, tol.zero))

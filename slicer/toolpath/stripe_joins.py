@@ -136,7 +136,7 @@ def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArr
     seg_b = np.clip(np.searchsorted(arc, at_b, side="right") - 1, first, last - 1)
     seg = np.concatenate([seg_a, seg_b])
     along = np.concatenate([at_a, at_b]) - arc[seg]
-    u = (p[seg + 1] - p[seg]) / np.maximum(step[seg], 1e-300)[:, None]
+    u = (p[seg + 1] - p[seg]) / np.maximum(step[seg], tol.tiny)[:, None]
     new = p[seg] + along[:, None] * u
     # inserted after the start of their segment (np.insert keeps the given order for equal
     # positions, so a's come before b's on a shared segment)
