@@ -12,6 +12,7 @@ from core.tolerance import tol
 from slicer.config import ToolpathConfig
 from slicer.extrusion import ExtrusionProfile
 from slicer.toolpath.linking import LIFT_FACTOR, Lifter
+from slicer.toolpath.pinholes import close_pinholes
 from slicer.toolpath.results import ComponentResult, LayerResult, Waypoints, travel_waypoints
 from slicer.toolpath.strategy import component_toolpath
 from slicer.toolpath.surface import components
@@ -26,7 +27,9 @@ def layer_pattern(index: int, first: str) -> int:
 def layer_toolpath(layer: LayerMesh, pattern: int, cfg: ToolpathConfig,
                    profile: ExtrusionProfile, measure_baselines: bool = True) -> LayerResult:
     """All components of one layer in nearest-neighbour order, joined by travel moves.
-    Layer 0 uses ``cfg.first_layer_beta`` instead of the profile's beta when it is set."""
+    Layer 0 uses ``cfg.first_layer_beta`` instead of the profile's beta when it is set.
+    Holes far narrower than a line are closed first (``pinholes.py``)."""
+    layer = close_pinholes(layer, profile)
     if layer.index == 0 and cfg.first_layer_beta > 0.0:
         profile = replace(profile, beta=cfg.first_layer_beta)
 
