@@ -14,7 +14,7 @@ from slicer.toolpath.build import compute_toolpath
 from slicer.toolpath.coverage import layer_coverage
 from slicer.toolpath.geodesic import boundary_distance
 from slicer.toolpath.line_source import LineSource
-from slicer.toolpath.ridge_fit import _first_peak, band_across, ridge_fitted_lines
+from slicer.toolpath.ridge_fit import band_across, ridge_fitted_lines
 from slicer.toolpath.surface_geometry import SurfaceGeometry
 from slicer.toolpath.width_error import line_spacing
 from tests.slicer.toolpath.pattern_meshes import disc, plate_with_holes
@@ -144,13 +144,19 @@ def test_a_plate_with_holes_keeps_the_pitch_that_spaces_its_lines_better(
 CORNER_HOLES = ((-13.5, -8.0), (-13.5, 8.0), (13.5, -8.0), (13.5, 8.0))
 
 
-def test_a_ray_crosses_the_ridge_at_its_first_peak() -> None:
-    """The boundary distance along a ray rises to the ridge and falls into the next front
-    (a hole's, a wider body beyond a neck): the first peak, noise within ``drop`` aside."""
-    along = np.array([[1.0, 2.0, 3.0, 2.5, 5.0],  # crosses at 3, then a deeper body
-                      [1.0, 2.0, 1.95, 3.0, 3.5],  # a dip within the noise: no crossing
-                      [0.5, 1.0, 1.5, 2.0, 2.5]])  # never falls: its maximum
-    assert np.allclose(_first_peak(along, 0.1), [3.0, 3.5, 2.5])
+def test_a_ray_beside_a_neck_stops_at_the_ridge_it_crosses() -> None:
+    """On that plate a ray from the rim beside a corner hole crosses the ridge of the
+    strip between the rim and the hole (about 3 mm), then runs past the hole into the
+    body, whose boundary distance is deeper: the strip is read at the first peak of the
+    distance along the ray (5 mm and less at the median), not at the deepest one (the body
+    behind: 7-12 mm, two lines too many in the strip)."""
+    v, f = plate_with_holes(38.0, 25.0, 1.5, h=0.5, centres=CORNER_HOLES)
+    b = band_across(v, f, boundary_distance(v, f, backend="eikonal"))
+    dx = np.min([np.abs(v[:, 0] - cx) for cx, _ in CORNER_HOLES], axis=0)
+    beside = (np.abs(v[:, 1]) >= 11.9) & (dx > 1.0) & (dx < 2.1)
+    assert beside.sum() > 20
+    assert np.median(b[beside]) <= 5.0
+    assert np.percentile(b[beside], 75) <= 5.5
 
 
 def test_a_body_beside_a_neck_keeps_its_width() -> None:
