@@ -41,6 +41,9 @@ FLARE = 1.0  # mm of width per mm along the part: where a ray reads more than a 
 OFF_RAY = 0.5  # a boundary crossing counts where it lies within this x its distance of the
 # ray's line, along the normal (a layer curving by up to 27 deg between the two sides)
 RAY_SAMPLES = 12  # points of each ray where the boundary distance is read
+SLACK = 0.25  # the blend's count holds where the part itself is at most this x spacing short
+# of it (past the usual rounding); narrower, the lines it carries in are dropped
+LOCAL_ROUNDS = 3  # neighbour averagings of the width read per vertex (its ray noise)
 CHUNK = 2_000_000  # ray-segment pairs tested at once (memory)
 
 
@@ -202,6 +205,10 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
                                  room, ridge, smooth)
     n_face = np.maximum(np.floor((fit / pitch)[f].mean(axis=1) + 0.5 - room), 1
                         ).astype(np.int64)
+    # ... but never more lines than the part holds where they are laid
+    held = _local_ratio(f, width, spacing)
+    n_face = np.minimum(n_face, np.maximum(np.floor(held[f].mean(axis=1) + 0.5 + SLACK), 1
+                                           ).astype(np.int64))
     phi = d / pitch
     parts: list[SurfaceLines] = []
     maps: list[NDArray[np.int64]] = []
@@ -214,7 +221,8 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
     if ridge.n_lines and np.any(n_face % 2 == 1):
         # an odd count's middle line on the ridge: the medial line where the count at its
         # vertices is odd (phi = n / 2 there: a quarter pitch beyond the last pair's level)
-        n_vertex = np.maximum(np.floor(fit / pitch + 0.5 - room), 1)
+        n_vertex = np.minimum(np.maximum(np.floor(fit / pitch + 0.5 - room), 1),
+                              np.maximum(np.floor(held + 0.5 + SLACK), 1))
         middle = clip_lines(ridge, vertices, f.astype(np.int32),
                             phi - np.floor(0.5 * n_vertex) - 0.25, 0.0)
         if middle.n_lines:
@@ -222,6 +230,32 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
             maps.append(np.arange(len(f)))
     lines = merge_lines(parts, maps) if parts else empty_lines()
     return lines, pitch
+
+
+def _local_ratio(f: NDArray[np.int64], width: NDArray[np.float64], spacing: float
+                 ) -> NDArray[np.float64]:
+    """(n,) float64, how many spacings the part is wide across each vertex: its own width
+    (``band_across``, averaged with its mesh neighbours LOCAL_ROUNDS times against the
+    noise of single rays) over ``spacing``; the most lines it holds there is this rounded
+    with SLACK to spare.
+
+    The count is read from the width blended over PITCH_SMOOTHING spacings, so that the
+    rings stay continuous where it changes; but the blend also carries a wide body's
+    count into a lobe that is shorter than the blend (suzanne's ears on her top layers,
+    7 mm wide, 3 lines, read as 4 from the head beside them and from their own rounded
+    ends), and a neck's low count into the rim's corner beyond a hole. Four lines in a
+    lobe three wide lay two rings and no middle line: the outer ring's sides 2 spacings
+    apart and the lobe's middle bare. Capped by the lobe's own width, it gets the ring and
+    the middle line its width holds."""
+    e = edge_topology(f).edges
+    n = len(width)
+    adj = sp.csr_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]],
+                                               np.r_[e[:, 1], e[:, 0]])), shape=(n, n))
+    deg = np.asarray(adj.sum(axis=1)).ravel() + 1.0
+    local = np.asarray(width, dtype=np.float64)
+    for _ in range(LOCAL_ROUNDS):
+        local = (adj @ local + local) / deg
+    return local / spacing
 
 
 def _laid_pitch(v: NDArray[np.float64], f: NDArray[np.int64], width: NDArray[np.float64],
