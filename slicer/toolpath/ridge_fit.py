@@ -34,7 +34,13 @@ from slicer.toolpath.isolines import iso_lines
 from slicer.toolpath.lines import SurfaceLines, empty_lines, merge_lines
 from slicer.toolpath.medial import medial_lines
 from slicer.toolpath.perimeter import clip_lines
-from slicer.toolpath.surface import boundary_edges, check_mesh, edge_topology, vertex_normals
+from slicer.toolpath.surface import (
+    boundary_edges,
+    boundary_loops,
+    check_mesh,
+    edge_topology,
+    vertex_normals,
+)
 
 FLARE = 1.0  # mm of width per mm along the part: where a ray reads more than a vertex near
 # the ridge allows at this rate, the ray ran along the part (the end of a bar) or grazed it
@@ -205,10 +211,13 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
                                  room, ridge, smooth)
     n_face = np.maximum(np.floor((fit / pitch)[f].mean(axis=1) + 0.5 - room), 1
                         ).astype(np.int64)
-    # ... but never more lines than the part holds where they are laid
-    held = _local_ratio(f, width, spacing)
-    n_face = np.minimum(n_face, np.maximum(np.floor(held[f].mean(axis=1) + 0.5 + SLACK), 1
-                                           ).astype(np.int64))
+    # ... but never more lines than a part without holes holds where they are laid
+    most = np.full(len(d), np.inf)
+    if len(boundary_loops(f)) == 1:
+        held = _local_ratio(f, width, spacing)
+        most = np.maximum(np.floor(held + 0.5 + SLACK), 1.0)
+        n_face = np.minimum(n_face, np.maximum(np.floor(held[f].mean(axis=1) + 0.5 + SLACK),
+                                               1.0).astype(np.int64))
     phi = d / pitch
     parts: list[SurfaceLines] = []
     maps: list[NDArray[np.int64]] = []
@@ -221,8 +230,7 @@ def ridge_fitted_lines(vertices: NDArray[np.float64], faces: NDArray[np.integer]
     if ridge.n_lines and np.any(n_face % 2 == 1):
         # an odd count's middle line on the ridge: the medial line where the count at its
         # vertices is odd (phi = n / 2 there: a quarter pitch beyond the last pair's level)
-        n_vertex = np.minimum(np.maximum(np.floor(fit / pitch + 0.5 - room), 1),
-                              np.maximum(np.floor(held + 0.5 + SLACK), 1))
+        n_vertex = np.minimum(np.maximum(np.floor(fit / pitch + 0.5 - room), 1), most)
         middle = clip_lines(ridge, vertices, f.astype(np.int32),
                             phi - np.floor(0.5 * n_vertex) - 0.25, 0.0)
         if middle.n_lines:
@@ -239,14 +247,12 @@ def _local_ratio(f: NDArray[np.int64], width: NDArray[np.float64], spacing: floa
     noise of single rays) over ``spacing``; the most lines it holds there is this rounded
     with SLACK to spare.
 
-    The count is read from the width blended over PITCH_SMOOTHING spacings, so that the
-    rings stay continuous where it changes; but the blend also carries a wide body's
-    count into a lobe that is shorter than the blend (suzanne's ears on her top layers,
-    7 mm wide, 3 lines, read as 4 from the head beside them and from their own rounded
-    ends), and a neck's low count into the rim's corner beyond a hole. Four lines in a
-    lobe three wide lay two rings and no middle line: the outer ring's sides 2 spacings
-    apart and the lobe's middle bare. Capped by the lobe's own width, it gets the ring and
-    the middle line its width holds."""
+    The count blended over PITCH_SMOOTHING spacings (rings stay continuous where it
+    changes) also carries a wide body's count into a lobe shorter than the blend: 4 lines,
+    two rings and no middle line, in suzanne's ears 3 wide, the outer ring's sides two
+    spacings apart. Capped by the lobe's own width: a ring and the middle line. Only
+    without holes: where the rings from the rim and the holes meet the cap helped one
+    machined plate and cost two others (docs/benchmarks.md, Session 21: caps)."""
     e = edge_topology(f).edges
     n = len(width)
     adj = sp.csr_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]],

@@ -10,11 +10,11 @@ import pytest
 from core.stages import Layers, Pattern
 from slicer.config import JobConfig
 from slicer.extrusion import load_profile
+from slicer.toolpath import ridge_fit
 from slicer.toolpath.build import compute_toolpath
 from slicer.toolpath.coverage import layer_coverage
 from slicer.toolpath.geodesic import boundary_distance
 from slicer.toolpath.line_source import LineSource
-from slicer.toolpath import ridge_fit
 from slicer.toolpath.ridge_fit import band_across, ridge_fitted_lines
 from slicer.toolpath.surface_geometry import SurfaceGeometry
 from slicer.toolpath.width_error import line_spacing
