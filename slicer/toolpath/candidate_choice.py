@@ -151,10 +151,11 @@ class Candidates:
         width = w_pt if flow == 1.0 else w_pt * v_pt / comp.flowed_speed(v_pt, flow, nominal)
         return measure_width(lines, width, comp.normals[lines.face], self._boundary, junctions)
 
-    def p90(self, m: VolumeMatch[Built]) -> float:
+    def p90(self, m: VolumeMatch[Built], junctions: bool = False) -> float:
         """p90 of the measured width error of a candidate (inf where nothing could be
-        measured: such a candidate never wins a comparison)."""
-        err = self.measure(m.result.lines, m.result.flow, m.result.scale).error
+        measured: such a candidate never wins a comparison); ``junctions``: its medial
+        lines meet at junctions (``measure``)."""
+        err = self.measure(m.result.lines, m.result.flow, m.result.scale, junctions).error
         return float(np.percentile(err, 90)) if len(err) else float("inf")
 
     def mean_error(self, m: VolumeMatch[Built]) -> float:
@@ -269,6 +270,17 @@ def choose(cand: Candidates, surf: LineSource, pattern: int, perimeter: bool,
             if (abs(alt.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
                     and cand.p90(alt) < cand.p90(match)):
                 surf, match, fallback = walled, alt, ComponentFallback.WALLS
+        if (used == Pattern.CONTOUR and cfg.fit_bands
+                and geo.narrow_share(0.5 * THIN_BAND_FIT * comp.w_mean, WALL_SHARE)
+                >= WALL_SHARE):
+            # walls too narrow for two lines (ribs between holes): contours on the wide
+            # part and one line along each wall, as on a component that is all such a
+            # band, kept where the lines keep their spacing better (p90)
+            ribbed = replace(surf, wall_half_width=0.5 * THIN_BAND_FIT * comp.w_mean)
+            alt = cand.run_joined(ribbed, used)
+            if (abs(alt.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
+                    and cand.p90(alt, junctions=True) < cand.p90(match)):
+                surf, match, fallback = ribbed, alt, ComponentFallback.RIBS
     if abs(match.rel_error) > THIN_SHORTFALL and fallback != ComponentFallback.CENTRE_LINE:
         # A band about one width wide (stripes vanish once cut back by W / 2, contours
         # double): the other pattern and one middle line tried; the closest volume kept.
