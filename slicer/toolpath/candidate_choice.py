@@ -275,11 +275,15 @@ def choose(cand: Candidates, surf: LineSource, pattern: int, perimeter: bool,
                 >= WALL_SHARE):
             # walls too narrow for two lines (ribs between holes): contours on the wide
             # part and one line along each wall, as on a component that is all such a
-            # band, kept where the lines keep their spacing better (p90)
+            # band, kept where the lines keep their spacing better (p90) as printed
+            # (flow-fitted where the volume is missed: the walls' lines cross at their
+            # junctions)
             ribbed = replace(surf, wall_half_width=0.5 * THIN_BAND_FIT * comp.w_mean)
             alt = cand.run_joined(ribbed, used)
-            if (abs(alt.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
-                    and cand.p90(alt, junctions=True) < cand.p90(match)):
+            printed = cand.as_printed(alt)
+            volume = float(printed.result.waypoints.deposited().sum())
+            if (abs(volume / cand.required - 1.0) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
+                    and cand.p90(printed, junctions=True) < cand.p90(cand.as_printed(match))):
                 surf, match, fallback = ribbed, alt, ComponentFallback.RIBS
     if abs(match.rel_error) > THIN_SHORTFALL and fallback != ComponentFallback.CENTRE_LINE:
         # A band about one width wide (stripes vanish once cut back by W / 2, contours

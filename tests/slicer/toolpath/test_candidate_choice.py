@@ -87,8 +87,9 @@ def test_contour_layer_ribs_get_one_line_each(monkeypatch: pytest.MonkeyPatch) -
     """Ribs 2 mm wide (0.9 W) between six holes beside a solid block 16 mm wide, on a
     contour layer (the octagonal pocket's honeycomb in miniature): contours alone leave the
     ribs between the last holes and the block bare (their ink laid elsewhere: p90 63 %,
-    8.4 % bare); with one line along each rib and contours on the block the spacing and the
-    coverage are better (p90 21 %, 5.4 % bare, 6.5 % twice), every rib gets its line."""
+    gap/overlap 8.5/4.2 %, on the ribs 8.2/7.2 %); with one line along each rib and
+    contours on the block the spacing and the coverage are better (p90 21 %, 6.7/5.3 %, on
+    the ribs 1.2/10.5 %: their lines cross at the junctions), every rib gets its line."""
     v, f = ribbed_block()
     layers = flat_layer(v, f, 0.6)
     res = compute_toolpath(layers, JobConfig(), PROFILE, measure_baselines=False, workers=1)
