@@ -24,6 +24,7 @@ from slicer.toolpath.component import Built, Component
 from slicer.toolpath.line_source import LineSource
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.linking import Lifter
+from slicer.toolpath.ribs import ribbed
 from slicer.toolpath.stripe_joins import coverage_miss
 from slicer.toolpath.surface import boundary_edges
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
@@ -153,8 +154,7 @@ class Candidates:
 
     def p90(self, m: VolumeMatch[Built], junctions: bool = False) -> float:
         """p90 of the measured width error of a candidate (inf where nothing could be
-        measured: such a candidate never wins a comparison); ``junctions``: its medial
-        lines meet at junctions (``measure``)."""
+        measured: such a candidate never wins a comparison); ``junctions``: ``measure``'s."""
         err = self.measure(m.result.lines, m.result.flow, m.result.scale, junctions).error
         return float(np.percentile(err, 90)) if len(err) else float("inf")
 
@@ -270,21 +270,9 @@ def choose(cand: Candidates, surf: LineSource, pattern: int, perimeter: bool,
             if (abs(alt.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
                     and cand.p90(alt) < cand.p90(match)):
                 surf, match, fallback = walled, alt, ComponentFallback.WALLS
-        if (used == Pattern.CONTOUR and cfg.fit_bands
-                and geo.narrow_share(0.5 * THIN_BAND_FIT * comp.w_mean, WALL_SHARE)
-                >= WALL_SHARE):
-            # walls too narrow for two lines (ribs between holes): contours on the wide
-            # part and one line along each wall, as on a component that is all such a
-            # band, kept where the lines keep their spacing better (p90) as printed
-            # (flow-fitted where the volume is missed: the walls' lines cross at their
-            # junctions)
-            ribbed = replace(surf, wall_half_width=0.5 * THIN_BAND_FIT * comp.w_mean)
-            alt = cand.run_joined(ribbed, used)
-            printed = cand.as_printed(alt)
-            volume = float(printed.result.waypoints.deposited().sum())
-            if (abs(volume / cand.required - 1.0) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
-                    and cand.p90(printed, junctions=True) < cand.p90(cand.as_printed(match))):
-                surf, match, fallback = ribbed, alt, ComponentFallback.RIBS
+        ribs = ribbed(cand, surf, match, used, 0.5 * THIN_BAND_FIT, WALL_SHARE, FLOW_FIT_ABOVE)
+        if ribs is not None:  # walls too narrow for two lines beside a wider part (ribs.py)
+            (surf, match), fallback = ribs, ComponentFallback.RIBS
     if abs(match.rel_error) > THIN_SHORTFALL and fallback != ComponentFallback.CENTRE_LINE:
         # A band about one width wide (stripes vanish once cut back by W / 2, contours
         # double): the other pattern and one middle line tried; the closest volume kept.

@@ -96,7 +96,7 @@ def _component_toolpath_unsafe(
     # against the width the waypoints carry (flow-fitted components print wider or
     # narrower lines on purpose), and against the profile's W(H) for comparison
     medial = (fallback == ComponentFallback.RIBS
-              or fallback == ComponentFallback.CENTRE_LINE and surf.geometry.loops != 2)
+              or (fallback == ComponentFallback.CENTRE_LINE and surf.geometry.loops != 2))
     measured = cand.measure(built.lines, built.flow, built.scale, medial)
     err_nominal = (measured.error if built.flow == 1.0 and built.scale is None
                    else cand.measure(built.lines, junctions=medial).error)

@@ -171,7 +171,7 @@ def ribbed_block(rib: float = 2.0, hole: tuple[float, float] = (6.0, 5.0), cols:
     hx, hy = hole
     height = 3 * rib + 2 * hy
     width = (cols + 1) * rib + cols * hx + block
-    nx, ny = int(round(width / h)), int(round(height / h))
+    nx, ny = round(width / h), round(height / h)
     xs, ys = np.linspace(0.0, width, nx + 1), np.linspace(0.0, height, ny + 1)
     gx, gy = np.meshgrid(xs, ys)
     p = np.column_stack([gx.ravel(), gy.ravel()])
