@@ -13,18 +13,33 @@ where its lines keep their spacing better as printed.
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 from core.stages import Pattern
 
 if TYPE_CHECKING:
-    from slicer.toolpath.candidate_choice import Candidates
-    from slicer.toolpath.component import Built
+    from slicer.config import ToolpathConfig
+    from slicer.toolpath.component import Built, Component
     from slicer.toolpath.line_source import LineSource
     from slicer.toolpath.volume import VolumeMatch
 
 
-def ribbed(cand: Candidates, surf: LineSource, match: VolumeMatch[Built], used: int,
+class _Candidates(Protocol):
+    """What is used of ``candidate_choice.Candidates`` (which calls ``ribbed``)."""
+
+    @property
+    def comp(self) -> Component: ...
+    @property
+    def cfg(self) -> ToolpathConfig: ...
+    @property
+    def required(self) -> float: ...
+
+    def run_joined(self, surface: LineSource, used: int) -> VolumeMatch[Built]: ...
+    def as_printed(self, m: VolumeMatch[Built]) -> VolumeMatch[Built]: ...
+    def p90(self, m: VolumeMatch[Built], junctions: bool = False) -> float: ...
+
+
+def ribbed(cand: _Candidates, surf: LineSource, match: VolumeMatch[Built], used: int,
            half_width: float, share: float, tolerance: float
            ) -> tuple[LineSource, VolumeMatch[Built]] | None:
     """The lines of a component printed with contours (``used``, band fitting on) with its

@@ -80,4 +80,3 @@ def test_stripe_layer_walls_get_their_centre_line(monkeypatch: pytest.MonkeyPatc
     radius = np.hypot(np.abs(tp.position[outer, 0]) - 26.0, tp.position[outer, 1])
     assert np.all(np.abs(radius - (14.0 - 1.2)) < 0.25)
     assert np.all(tp.pattern[tp.extrude] == Pattern.STRIPE)
-
