@@ -87,4 +87,5 @@ class ComponentFallback(Status):
     HOLES_FILLED = "holes-filled", "fitted contours left holes (no band): eq. 9's lines fill them"
     NO_BAND = "no-band", "no band: eq. 9's contours alone kept their spacing better"
     WALLS = "walls", "stripes on the wide part, one line along each narrow wall"
+    RIBS = "ribs", "contours on the wide part, one line along each wall too narrow for two"
     TIP = "tip", "too small for any line of its pattern (a tip): one line across it"

@@ -24,6 +24,7 @@ from slicer.toolpath.component import Built, Component
 from slicer.toolpath.line_source import LineSource
 from slicer.toolpath.lines import SurfaceLines
 from slicer.toolpath.linking import Lifter
+from slicer.toolpath.ribs import ribbed
 from slicer.toolpath.stripe_joins import coverage_miss
 from slicer.toolpath.surface import boundary_edges
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
@@ -151,10 +152,10 @@ class Candidates:
         width = w_pt if flow == 1.0 else w_pt * v_pt / comp.flowed_speed(v_pt, flow, nominal)
         return measure_width(lines, width, comp.normals[lines.face], self._boundary, junctions)
 
-    def p90(self, m: VolumeMatch[Built]) -> float:
+    def p90(self, m: VolumeMatch[Built], junctions: bool = False) -> float:
         """p90 of the measured width error of a candidate (inf where nothing could be
-        measured: such a candidate never wins a comparison)."""
-        err = self.measure(m.result.lines, m.result.flow, m.result.scale).error
+        measured: such a candidate never wins a comparison); ``junctions``: ``measure``'s."""
+        err = self.measure(m.result.lines, m.result.flow, m.result.scale, junctions).error
         return float(np.percentile(err, 90)) if len(err) else float("inf")
 
     def mean_error(self, m: VolumeMatch[Built]) -> float:
@@ -269,6 +270,9 @@ def choose(cand: Candidates, surf: LineSource, pattern: int, perimeter: bool,
             if (abs(alt.rel_error) <= max(FLOW_FIT_ABOVE, abs(match.rel_error))
                     and cand.p90(alt) < cand.p90(match)):
                 surf, match, fallback = walled, alt, ComponentFallback.WALLS
+        ribs = ribbed(cand, surf, match, used, 0.5 * THIN_BAND_FIT, WALL_SHARE, FLOW_FIT_ABOVE)
+        if ribs is not None:  # walls too narrow for two lines beside a wider part (ribs.py)
+            (surf, match), fallback = ribs, ComponentFallback.RIBS
     if abs(match.rel_error) > THIN_SHORTFALL and fallback != ComponentFallback.CENTRE_LINE:
         # A band about one width wide (stripes vanish once cut back by W / 2, contours
         # double): the other pattern and one middle line tried; the closest volume kept.

@@ -8,7 +8,7 @@ option is ``dataclasses.replace(source, option=...)``, which shares the geometry
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -47,8 +47,9 @@ class LineSource:
         perimeter: stripes get one loop inside the boundary (``perimeter.py``).
         fill_holes: the fitted contours leave holes (``band_fit_covers``): eq. 9's lines
             fill them.
-        wall_half_width: stripes only where the component is wider than 2 x this, its
-            narrow walls get their centre line (``narrow_walls``); 0: stripes everywhere.
+        wall_half_width: stripes (or contours) only where the component is wider than 2 x
+            this, its narrow walls get their centre line (``narrow_walls``, ``ribs``); 0:
+            the pattern everywhere.
         fit_ridge: contours that are not fitted to a band get a whole number of lines
             across the component's local width (``ridge_fit.py``) instead of eq. 9's.
         laid_pitch: those lines at the pitch of the count laid where one is dropped for
@@ -151,6 +152,14 @@ class LineSource:
                 return None
             wall = self.geometry.reach(self.wall_half_width) > self.wall_half_width
             return np.where(wall, centre, 1.0)
+        if pattern == Pattern.CONTOUR and self.wall_half_width > 0.0:
+            # the walls' medial lines as wide as the wall, the contours as without walls
+            rib = self.centre_scale(spacing)
+            base = replace(self, wall_half_width=0.0).width_scale(pattern, spacing)
+            if rib is None:
+                return base
+            wall = self.geometry.reach(self.wall_half_width) > self.wall_half_width
+            return np.where(wall, rib, 1.0 if base is None else base)
         if self._ridge_fitted(pattern):
             pitch = self.geometry.ridge_fit(spacing, self.laid_pitch)[1]
             return np.asarray(np.clip(pitch / spacing, *CENTRE_WIDTH_SCALE), dtype=np.float64)
@@ -207,6 +216,19 @@ class LineSource:
         ident = np.arange(len(geo.faces))
         return merge_lines([walls, wide], [ident, ident])
 
+    def ribs(self, contours: SurfaceLines) -> SurfaceLines:
+        """``contours`` kept where the component is at least 2 x wall_half_width wide, and
+        the medial line along its narrower walls (``centre_lines``): a rib narrower than
+        about 1.5 W between two holes holds one line, not a ring from each hole (two lines
+        a rib's width apart) nor none (the rim's rings only, the ribs' ink laid there;
+        the octagonal pocket's honeycomb)."""
+        geo, hw = self.geometry, self.wall_half_width
+        reach = geo.reach(hw)
+        wide = clip_lines(contours, geo.vertices, geo.faces, -reach, -hw)
+        walls = clip_lines(self.centre_lines(), geo.vertices, geo.faces, reach, hw)
+        ident = np.arange(len(geo.faces))
+        return merge_lines([walls, wide], [ident, ident])
+
     def lines(self, pattern: int, spacing: float, poisson: bool = False) -> SurfaceLines:
         """Contours or stripes at ``spacing`` on this surface (its units).
 
@@ -215,6 +237,8 @@ class LineSource:
         gets a loop along its middle).
         """
         geo = self.geometry
+        if pattern == Pattern.CONTOUR and self.wall_half_width > 0.0:
+            return self.ribs(replace(self, wall_half_width=0.0).lines(pattern, spacing))
         if self._ridge_fitted(pattern):
             return geo.ridge_fit(spacing, self.laid_pitch)[0]
         if pattern == Pattern.CONTOUR:

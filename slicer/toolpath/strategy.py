@@ -95,7 +95,8 @@ def _component_toolpath_unsafe(
     t0 = time.perf_counter()
     # against the width the waypoints carry (flow-fitted components print wider or
     # narrower lines on purpose), and against the profile's W(H) for comparison
-    medial = fallback == ComponentFallback.CENTRE_LINE and surf.geometry.loops != 2
+    medial = (fallback == ComponentFallback.RIBS
+              or (fallback == ComponentFallback.CENTRE_LINE and surf.geometry.loops != 2))
     measured = cand.measure(built.lines, built.flow, built.scale, medial)
     err_nominal = (measured.error if built.flow == 1.0 and built.scale is None
                    else cand.measure(built.lines, junctions=medial).error)

@@ -79,3 +79,37 @@ def test_slab_volumes_are_reported_per_layer(sliced: dict[bool, Path]) -> None:
     scale = json.loads((sliced[True] / "report.json").read_text())["slicing"]["height_slab_scale"]
     assert [scale["min"], scale["max"]] == pytest.approx([1.0, 1.0], abs=1e-6)
     assert scale["layers_beyond_1pct"] == [] and scale["at_limit"] == 0
+
+
+def test_thin_walls_are_refused_even_where_other_layers_make_up_the_volume() -> None:
+    """Walls laying 2 % of the model in extra ink on layer 1 while layer 0 holds 2 % less
+    than its slab (the octagonal pocket: ribs under the narrowest line, the top slab
+    grazed): the whole volume is exact, the walls still print wider than the model. Refused
+    as any part with that much extra ink is (before: printed, the two errors cancelling in
+    the sum); printed with ``thin_walls = "thicken"``."""
+    from types import SimpleNamespace
+    from typing import Any
+
+    from slicer.pipeline import _too_thin
+    from slicer.toolpath.thin_features import ThinFeatures, ThinWallsError
+
+    thin = ThinFeatures(np.array([1]), np.array([100.0]), np.array([120.0]), np.array([1.2]))
+    result: Any = SimpleNamespace(thin=thin)
+    surface: Any = SimpleNamespace(volume_mm3=1000.0, bbox_mm=(40.0, 30.0, 3.0),
+                              source="/models/ribs.stl")
+
+    def report() -> dict[str, Any]:
+        return {"deposited_volume_mm3": 1000.0,
+                "per_layer": [{"layer": 0, "deposited_mm3": 880.0},
+                              {"layer": 1, "deposited_mm3": 120.0}]}
+
+    slabs = np.array([900.0, 100.0])
+    for walls in ("refuse", "thicken"):
+        job = load_job().with_overrides(toolpath={"thin_walls": walls})
+        section = report()
+        if walls == "refuse":
+            with pytest.raises(ThinWallsError, match=r"ribs\.stl has walls about 1\.00 mm"):
+                _too_thin(result, section, job, surface, slabs)
+        else:
+            _too_thin(result, section, job, surface, slabs)
+        assert section["too_thin"]["excess_share"] == pytest.approx(0.02)

@@ -158,3 +158,33 @@ def rings_with_bridge(ring_radius: float = 14.0, wall: float = 2.4, centre_x: fl
     p = np.concatenate([p[margin], *circles])
     tri = Delaunay(p).simplices
     return flat_mesh(p, tri[solid(p[tri].mean(axis=1))])
+
+
+def ribbed_block(rib: float = 2.0, hole: tuple[float, float] = (6.0, 5.0), cols: int = 3,
+                 block: float = 16.0, h: float = 0.5
+                 ) -> tuple[NDArray[np.float64], NDArray[np.int32]]:
+    """A flat grid of ribs ``rib`` wide (mm) between two rows of ``cols`` rectangular holes
+    ``hole`` (x, y mm), a rim ``rib`` wide round them, and a solid square block ``block``
+    wide on their right (the octagonal pocket's honeycomb beside its solid boss, in
+    miniature): walls about one W wide joined to a part many W wide. Square cells of
+    side h (dimensions multiples of h), each split into two faces; normal +z."""
+    hx, hy = hole
+    height = 3 * rib + 2 * hy
+    width = (cols + 1) * rib + cols * hx + block
+    nx, ny = round(width / h), round(height / h)
+    xs, ys = np.linspace(0.0, width, nx + 1), np.linspace(0.0, height, ny + 1)
+    gx, gy = np.meshgrid(xs, ys)
+    p = np.column_stack([gx.ravel(), gy.ravel()])
+    i, j = np.meshgrid(np.arange(nx), np.arange(ny))
+    a = (j * (nx + 1) + i).ravel()
+    cells = np.column_stack([a, a + 1, a + nx + 2, a + nx + 1])
+    centre = p[cells].mean(axis=1)
+    solid = np.ones(len(cells), dtype=bool)
+    for c in range(cols):
+        x0 = rib + c * (hx + rib)
+        for y0 in (rib, 2 * rib + hy):
+            solid &= ~((centre[:, 0] > x0) & (centre[:, 0] < x0 + hx)
+                       & (centre[:, 1] > y0) & (centre[:, 1] < y0 + hy))
+    cells = cells[solid]
+    tri = np.concatenate([cells[:, [0, 1, 2]], cells[:, [0, 2, 3]]])
+    return flat_mesh(p, tri)
