@@ -39,6 +39,8 @@ SPLIT_OFFSET_FAC = 1e-5
 # Rounds of bisecting crowded edges (one edge per face each round) before the wrap is left
 # as it is and ``load_surface`` judges it.
 BISECT_ROUNDS = 4
+# Faces around a crowded edge closer in angle than this (rad) lie in one half-plane.
+TIE_RAD = 1e-9
 
 # The outward faces of a positively oriented tet: face k is opposite vertex k.
 _TET_FACES = np.array([(1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)])
@@ -129,8 +131,9 @@ def split_pinches(vertices: np.ndarray, faces: np.ndarray, offset: float
     manifold = np.flatnonzero(uses[edge_id] == 2)
     order = manifold[np.argsort(edge_id[manifold], kind="stable")]
     first, second = order[0::2], order[1::2]  # the two half-edges of each manifold edge
+    patch = _patches(first // 3, second // 3, m)
     more_first, more_second = _radial_pairs(np.asarray(vertices, dtype=np.float64), faces,
-                                            directed, edge_id, uses)
+                                            directed, edge_id, uses, patch)
     first = np.concatenate([first, more_first])
     second = np.concatenate([second, more_second])
     same = directed[first, 0] == directed[second, 0]  # same start vertex: a flipped neighbour
@@ -158,11 +161,29 @@ def split_pinches(vertices: np.ndarray, faces: np.ndarray, offset: float
     return new_v, new_id.reshape(m, 3).astype(np.int64), int(np.count_nonzero(copies > 1))
 
 
+def _patches(face_a: np.ndarray, face_b: np.ndarray, m: int) -> np.ndarray:
+    """(m,) int label of each of ``m`` faces: the sets joined across manifold edges (faces
+    ``face_a[i]`` and ``face_b[i]`` share one)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    graph = coo_matrix((np.ones(len(face_a)), (face_a, face_b)), shape=(m, m))
+    return np.asarray(connected_components(graph, directed=False)[1], dtype=np.int64)
+
+
 def _radial_pairs(vertices: np.ndarray, faces: np.ndarray, directed: np.ndarray,
-                  edge_id: np.ndarray, uses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Around each edge of 4 or more faces, the pairs of half-edges whose faces bound the same
-    wedge of solid: faces sorted by angle around the edge, each joined to its neighbour on
-    the side its normal points away from. Returns two (p,) int64 half-edge indices."""
+                  edge_id: np.ndarray, uses: np.ndarray, patch: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Around each edge of 3 or more faces, the pairs of half-edges whose faces bound the same
+    wedge of solid. Faces sorted by angle around the edge each open a wedge (the solid lies
+    ahead of them) or close one; openings and closings are matched like brackets, starting
+    where the fewest wedges overlap, so wedges that overlap (shells pushed slightly into each
+    other) nest instead of crossing, and the union (``slicer.shell_union``) merges them. An
+    edge whose openings and closings do not balance (inconsistent winding) is left unpaired.
+    Around an edge of 4 faces, where the other pairing joins faces of one ``patch`` (m,)
+    (the face sets joined across manifold edges) and the nesting does not, two solids cross
+    there (they overlap through the edge) and each keeps its own faces.
+    Returns two (p,) int64 half-edge indices: the opening face's and its closing face's."""
     crowded = np.flatnonzero(uses[edge_id] > 2)
     if not len(crowded):
         return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
@@ -182,16 +203,47 @@ def _radial_pairs(vertices: np.ndarray, faces: np.ndarray, directed: np.ndarray,
     ref_y = np.cross(axis, ref_x)
     angle = np.arctan2(np.einsum("ij,ij->i", radial, ref_y),
                        np.einsum("ij,ij->i", radial, ref_x))
-    order = np.lexsort((angle, edge))
-    crowded, axis, radial, group = crowded[order], axis[order], radial[order], group[order]
-    begin = np.cumsum(size) - size  # first sorted position of each edge's group
-    position = np.arange(len(crowded))
-    after = begin[group] + (position - begin[group] + 1) % size[group]
     tri = vertices[faces[crowded // 3]]
     normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     # the solid lies on the side of increasing angle where the normal points against it
-    inside_ahead = np.einsum("ij,ij->i", normal, np.cross(axis, radial)) < 0
-    return crowded[inside_ahead], crowded[after[inside_ahead]]
+    opens = np.einsum("ij,ij->i", normal, np.cross(axis, radial)) < 0
+    order = np.lexsort((angle, edge))
+    begin = (np.cumsum(size) - size)[group[order]]  # first sorted position of each group
+    count = size[group[order]]
+    position = np.arange(len(crowded))
+    after = begin + (position - begin + 1) % count
+    # Two faces in one half-plane (solids touching face to face): the one closing the solid
+    # behind it comes first, so the two solids stay apart.
+    gap = np.abs(np.angle(np.exp(1j * (angle[order][after] - angle[order]))))
+    swap = np.flatnonzero((gap < TIE_RAD) & opens[order] & ~opens[order][after])
+    order[swap], order[after[swap]] = order[after[swap]], order[swap]
+    crowded, opens, group = crowded[order], opens[order], group[order]
+    step = np.where(opens, 1, -1)
+    level = np.cumsum(step)
+    level -= np.repeat(level[np.cumsum(size) - size] - step[np.cumsum(size) - size], size)
+    balanced = np.bincount(group, weights=step, minlength=len(size)) == 0
+    # start each edge's cycle just after its (first) lowest level: every level is then >= 0
+    low = np.lexsort((position, level, group))[np.cumsum(size) - size]
+    turned = (position - low[group] - 1) % count
+    order = np.lexsort((turned, group))
+    opens, step, group, crowded = opens[order], step[order], group[order], crowded[order]
+    level = np.cumsum(step)
+    level -= np.repeat(level[np.cumsum(size) - size] - step[np.cumsum(size) - size], size)
+    # an opening from level k and the next closing back to k bound one wedge: sorted by
+    # (edge, k, position) they follow each other
+    outer = np.where(opens, level - 1, level)
+    mine = np.flatnonzero(balanced[group])
+    pairs = mine[np.lexsort((mine, outer[mine], group[mine]))]
+    first, second = pairs[0::2], pairs[1::2]
+    # edges of 4 faces: their two pairs follow each other
+    head = np.flatnonzero((size[group[first]] == 4)
+                          & (np.r_[-1, group[first][:-1]] != group[first]))
+    own = patch[crowded[first] // 3] == patch[crowded[second] // 3]
+    other = ((patch[crowded[first[head]] // 3] == patch[crowded[second[head + 1]] // 3])
+             & (patch[crowded[first[head + 1]] // 3] == patch[crowded[second[head]] // 3]))
+    cross = head[other & ~(own[head] & own[head + 1])]
+    second[cross], second[cross + 1] = second[cross + 1], second[cross]
+    return crowded[first], crowded[second]
 
 
 def bisect_crowded(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -234,6 +286,31 @@ def bisect_crowded(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray,
             np.vstack([faces[keep], halves]))
 
 
+def separate_shells(vertices: np.ndarray, faces: np.ndarray, offset: float
+                    ) -> tuple[np.ndarray, np.ndarray, int]:
+    """``split_pinches``, then up to ``BISECT_ROUNDS`` rounds of ``bisect_crowded`` and
+    ``split_pinches`` where parts touch along an edge whose ends they share: a closed surface
+    of parts touching along edges or at points as separate closed shells.
+
+    Args:
+        vertices: (n, 3) float64. faces: (m, 3) int, closed, consistently wound.
+        offset: how far each copy of a split vertex moves into its own faces (input units;
+            0 keeps the copies where the vertex was).
+
+    Returns:
+        (vertices (n', 3) float64, faces (m', 3) int64, vertices split); non-manifold
+        edges are left where the rounds do not resolve them.
+    """
+    out_v, out_f, pinches = split_pinches(vertices, faces, offset)
+    for _ in range(BISECT_ROUNDS):  # touching along an edge whose ends the parts share
+        if not non_manifold_edges(out_f):
+            break
+        out_v, out_f = bisect_crowded(out_v, out_f)
+        out_v, out_f, more = split_pinches(out_v, out_f, offset)
+        pinches += more
+    return out_v, out_f, pinches
+
+
 def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, Wrap]:
     """The boundary of fTetWild's winding-number tet mesh of ``vertices`` (n, 3) float64
     and ``faces`` (m, 3) int (vertices merged).
@@ -258,13 +335,7 @@ def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarra
     tets = orient_positive(points, tets)
     out_v, out_f = compact(points, boundary_faces(tets))
     diagonal = float(np.linalg.norm(np.ptp(out_v, axis=0)))
-    out_v, out_f, pinches = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
-    for _ in range(BISECT_ROUNDS):  # touching along an edge whose ends the parts share
-        if not non_manifold_edges(out_f):
-            break
-        out_v, out_f = bisect_crowded(out_v, out_f)
-        out_v, out_f, more = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
-        pinches += more
+    out_v, out_f, pinches = separate_shells(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
     return out_v, out_f, Wrap(non_manifold_edges(faces), open_edges(faces), len(faces),
                               len(out_f),
                               signed_volume(np.asarray(vertices, dtype=np.float64), faces),
