@@ -38,15 +38,15 @@ from core.errors import InputError
 from core.tolerance import tol
 from slicer.config import ModelConfig
 from slicer.mesh_io import Surface, clean_faces, load_surface, mm_per_unit
-from slicer.shell_union import union_shells
-from slicer.solid_volume import shells
-from slicer.surface_refusal import RepairRefused, SurfaceReason, SurfaceRefused
-from slicer.winding_repair import (
+from slicer.shell_split import (
     SPLIT_OFFSET_FAC,
     non_manifold_edges,
     open_edges,
     separate_shells,
 )
+from slicer.shell_union import union_shells
+from slicer.solid_volume import shells
+from slicer.surface_refusal import RepairRefused, SurfaceReason, SurfaceRefused
 from slicer.wrap_cache import cached_wrap, stored_wrap
 
 _EDITOR = "close it in a mesh editor (e.g. Blender 3D-Print Toolbox, Meshmixer)"

@@ -15,15 +15,9 @@ from slicer import tet_cache, wrap_cache
 from slicer.mesh_io import load_surface
 from slicer.repair import fill_holes, load_repaired, repairable
 from slicer.repair_offer import _refusal, offer_fix, repair_offer
+from slicer.shell_split import bisect_crowded, non_manifold_edges, split_pinches
 from slicer.surface_refusal import RepairRefused, SurfaceReason, SurfaceRefused
-from slicer.winding_repair import (
-    Wrap,
-    bisect_crowded,
-    boundary_faces,
-    non_manifold_edges,
-    split_pinches,
-    wrap,
-)
+from slicer.winding_repair import Wrap, boundary_faces, wrap
 
 # Seconds a test gives the check that --repair works (the host may be loaded; the 30 s the
 # refusal waits is the product's limit, not what these tests measure).

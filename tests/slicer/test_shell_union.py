@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import trimesh
 
+from slicer.shell_split import non_manifold_edges, open_edges
 from slicer.shell_union import union_shells
-from slicer.winding_repair import non_manifold_edges, open_edges
 
 
 def _boxes(*centres: tuple[float, float, float], size: float = 10.0) -> trimesh.Trimesh:
