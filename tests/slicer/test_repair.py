@@ -15,7 +15,7 @@ from slicer import tet_cache, wrap_cache
 from slicer.mesh_io import load_surface
 from slicer.repair import fill_holes, load_repaired, repairable
 from slicer.repair_offer import _refusal, offer_fix, repair_offer
-from slicer.shell_split import bisect_crowded, non_manifold_edges, split_pinches
+from slicer.shell_split import non_manifold_edges
 from slicer.surface_refusal import RepairRefused, SurfaceReason, SurfaceRefused
 from slicer.winding_repair import Wrap, boundary_faces, wrap
 
@@ -157,36 +157,6 @@ def test_a_soup_is_still_refused(tmp_path: Path) -> None:
     with pytest.raises(InputError) as still:
         load_repaired(path)
     assert "its faces enclose nothing (open sheets, a polygon soup)" in still.value.fix
-
-
-def test_boxes_touching_along_an_edge_become_two_shells() -> None:
-    low = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
-    high = low.copy()
-    high.apply_translation([10.0, 10.0, 0.0])  # shares the vertical edge x = y = 5
-    both = low + high
-    both.merge_vertices()
-    assert non_manifold_edges(np.asarray(both.faces)) == 1
-    v, f, split = split_pinches(np.asarray(both.vertices), np.asarray(both.faces), 1e-4)
-    assert split == 2 and len(v) == len(both.vertices) + 2
-    apart = trimesh.Trimesh(v, f, process=False)
-    assert apart.is_watertight and apart.is_winding_consistent
-    assert non_manifold_edges(f) == 0 and apart.body_count == 2
-    assert apart.volume == pytest.approx(2000.0, rel=1e-4)
-
-
-def test_bisecting_a_crowded_edge_keeps_the_surface_closed() -> None:
-    low = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
-    high = low.copy()
-    high.apply_translation([10.0, 10.0, 0.0])
-    both = low + high
-    both.merge_vertices()
-    v, f = bisect_crowded(np.asarray(both.vertices), np.asarray(both.faces))
-    assert len(v) == len(both.vertices) + 1 and len(f) == len(both.faces) + 4
-    assert non_manifold_edges(f) == 2  # the two halves of the shared edge
-    v, f, split = split_pinches(v, f, 1e-4)
-    apart = trimesh.Trimesh(v, f, process=False)
-    assert split == 3 and apart.is_watertight and apart.body_count == 2
-    assert apart.volume == pytest.approx(2000.0, rel=1e-4)
 
 
 def test_a_wrap_past_its_time_is_not_offered_as_checked(
@@ -334,35 +304,6 @@ def test_the_offer_checks_wrap_is_the_one_repair_uses(tmp_path: Path,
     surface = load_repaired(path)
     assert calls == []  # read back, not wrapped again
     assert f"(checked: it {surface.notes[0].removeprefix('--repair: ')})" in offer.fix
-
-
-def test_a_face_with_two_crowded_edges_gets_both_split_in_two_rounds() -> None:
-    """Cube A with cubes touching two of its top edges: a face of A holds both crowded
-    edges; each round splits one of them (the lowest), so neither stays blocked."""
-    def cube(at: tuple[float, float, float]) -> trimesh.Trimesh:
-        box = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
-        box.apply_translation(at)
-        return box
-
-    both = cube((0.0, 0.0, 0.0)) + cube((10.0, 0.0, 10.0)) + cube((0.0, 10.0, 10.0))
-    both.merge_vertices()
-    v, f = np.asarray(both.vertices, dtype=np.float64), np.asarray(both.faces)
-    uses = {}
-    for a, b in np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1):
-        uses[(a, b)] = uses.get((a, b), 0) + 1
-    face = next(t for t in f if sum(uses[tuple(sorted((t[k], t[(k + 1) % 3])))] > 2
-                                    for k in range(3)) == 2)
-    crowded = [tuple(sorted((face[k], face[(k + 1) % 3]))) for k in range(3)
-               if uses[tuple(sorted((face[k], face[(k + 1) % 3])))] > 2]
-    mids = [0.5 * (v[a] + v[b]) for a, b in crowded]
-
-    def split_at(points: np.ndarray) -> list[bool]:
-        return [bool(np.any(np.linalg.norm(points - m, axis=1) < 1e-9)) for m in mids]
-
-    v1, f1 = bisect_crowded(v, f)
-    assert sorted(split_at(v1)) == [False, True]  # one per face and round
-    v2, _ = bisect_crowded(v1, f1)
-    assert split_at(v2) == [True, True]
 
 
 def test_the_offer_reads_what_repair_tried_from_its_type_not_its_words() -> None:
