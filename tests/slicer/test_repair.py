@@ -324,3 +324,21 @@ def test_a_refusal_sent_by_the_check_process_keeps_its_type() -> None:
     assert back.one_line() == sent.one_line()
     plain = _refusal("m.stl: ended", "fix")
     assert type(plain) is InputError and plain.one_line() == "m.stl: ended; fix"
+
+
+def test_a_wrap_and_the_bodies_kept_beside_it_are_joined(tmp_path: Path) -> None:
+    """The finned cube (wrapped) and a closed cube pushed half into it (kept as it is): two
+    overlapping shells, joined into one solid that counts the overlap once."""
+    fin = _cube_with_a_fin(20.0)
+    kept = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+    kept.apply_translation([10.0, 0.0, 0.0])  # x 5..15: half inside the cube's x -10..10
+    both = trimesh.Trimesh(np.vstack([fin.vertices, kept.vertices]),
+                           np.vstack([fin.faces, kept.faces + len(fin.vertices)]), process=False)
+    path = tmp_path / "fin_and_cube.stl"
+    both.export(path)
+    surface = load_repaired(path)
+    mesh = surface.as_trimesh()
+    assert mesh.is_watertight and mesh.body_count == 1
+    assert surface.volume_mm3 == pytest.approx(8500.0, rel=0.03)
+    assert "(1 of 2 bodies, the others kept as they are; " in surface.notes[0]
+    assert "2 shells joined into one solid, " in surface.notes[0]
