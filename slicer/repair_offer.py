@@ -5,11 +5,11 @@ tried and works.
 (``slicer.repair``), the repair is tried before the refusal is said: a fill, a split and
 join or a stored wrap runs at once, a wrap to make runs in a child process given a few
 seconds (fTetWild's time grows with the input's faces, and it holds the interpreter while it
-runs, so only a process can be stopped). The fix then says ``re-run with --repair`` and what it changes, or what
-``--repair`` did and why that is still refused, or that it was not checked in time. The
-child stores its wrap (``slicer.wrap_cache``), so the ``--repair`` run that follows, or
-``mesp check``, uses that very wrap. What a repair that did not help tried is read from the
-refusal's typed field (``RepairRefused.tried``), not parsed from its words.
+runs, so only a process can be stopped). The fix then says ``re-run with --repair`` and
+what it changes, or what ``--repair`` did and why that is still refused, or that it was not
+checked in time. The child stores its wrap (``slicer.wrap_cache``), so the ``--repair`` run
+that follows, or ``mesp check``, uses that very wrap. What a repair that did not help tried
+is read from the refusal's typed field (``RepairRefused.tried``), not parsed from its words.
 """
 
 from __future__ import annotations
