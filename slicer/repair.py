@@ -12,10 +12,16 @@ surface's notes, so the report and the command say it.
 
 The repair is picked by the refusal's reason (``SurfaceRefused.reason``): an open surface is
 filled, and where the filled surface is still refused (open sheets, a wall with a hole) it is
-wrapped by fTetWild's winding-number test, which handles open surfaces; a closed,
-non-manifold surface is wrapped. Wraps are kept per input (``slicer.wrap_cache``), so a
-repeated run, or the ``--repair`` run after the check that offered it, gets the same surface.
-Whether ``--repair`` is offered, and checked, is ``slicer.repair_offer``.
+wrapped by fTetWild's winding-number test, which handles open surfaces. A closed,
+non-manifold surface (an assembly's bodies touching along edges or faces, or pushed into
+each other) is split where its parts touch (``winding_repair.separate_shells``) and its
+shells joined into one solid by manifold3d (``slicer.shell_union``): exact, in seconds, and
+one boundary, which fTetWild meshes far faster than overlapping shells; where that split
+leaves a crowded edge, the surface is wrapped. A wrap of several shells is joined the same
+way. Wraps are kept per input (``slicer.wrap_cache``), so a repeated run, or the
+``--repair`` run after the check that offered it, gets the same surface; the split and the
+union are deterministic. A repaired surface still refused raises ``RepairRefused`` (what
+was tried, typed). Whether ``--repair`` is offered, and checked, is ``slicer.repair_offer``.
 """
 
 from __future__ import annotations
@@ -32,7 +38,15 @@ from core.errors import InputError
 from core.tolerance import tol
 from slicer.config import ModelConfig
 from slicer.mesh_io import Surface, clean_faces, load_surface, mm_per_unit
-from slicer.surface_refusal import SurfaceReason, SurfaceRefused
+from slicer.shell_split import (
+    SPLIT_OFFSET_FAC,
+    non_manifold_edges,
+    open_edges,
+    separate_shells,
+)
+from slicer.shell_union import union_shells
+from slicer.solid_volume import shells
+from slicer.surface_refusal import RepairRefused, SurfaceReason, SurfaceRefused
 from slicer.wrap_cache import cached_wrap, stored_wrap
 
 _EDITOR = "close it in a mesh editor (e.g. Blender 3D-Print Toolbox, Meshmixer)"
@@ -141,9 +155,9 @@ def _load_filled(path: Path, units: str | ModelConfig, mesh: trimesh.Trimesh,
         surface = _load_as(path, units, vertices, faces, "the filled surface")
     except SurfaceRefused as exc:
         if exc.reason is SurfaceReason.FLAT:  # sheets closed on themselves: no inside to find
-            raise InputError(f"{path.name} is still refused after --repair {holes} "
-                             f"({exc.problem})", f"its faces enclose nothing (open sheets, a "
-                             f"polygon soup): {_EDITOR}") from exc
+            raise RepairRefused(path.name, f"{holes} ({exc.problem})",
+                                f"its faces enclose nothing (open sheets, a polygon soup): "
+                                f"{_EDITOR}") from exc
         return _load_wrapped(path, units, raw_v, raw_f, wrap, f"{holes} ({exc.problem}) and ")
     scale = _scale(surface, vertices)
     line = (f"--repair: filled {fill.holes} hole{'s' if fill.holes != 1 else ''} "
@@ -186,13 +200,17 @@ def _load_wrapped(path: Path, units: str | ModelConfig, vertices: np.ndarray,
     fix = ("its surface does not bound a solid fTetWild can find (overlapping or open "
            f"sheets): {_EDITOR}")
     if not len(out_f):
-        raise InputError(f"{path.name} is still refused after --repair {tried}wrapped it: "
-                         "fTetWild's winding-number test finds no inside", fix)
+        raise RepairRefused(path.name, f"{tried}wrapped it: fTetWild's winding-number test "
+                            "finds no inside", fix)
+    parts = int(shells(out_f).max()) + 1
+    joined = union_shells(out_v, out_f) if parts > 1 else None
+    if joined is not None:  # fTetWild meshes one boundary far faster than overlapping shells
+        out_v, out_f = joined
     try:
         surface = _load_as(path, units, out_v, out_f, "the wrapped surface")
     except InputError as exc:
-        raise InputError(f"{path.name} is still refused after --repair {tried}wrapped it "
-                         f"with fTetWild ({exc.problem})", fix) from exc
+        raise RepairRefused(path.name, f"{tried}wrapped it with fTetWild ({exc.problem})",
+                            fix) from exc
     scale = _scale(surface, out_v)
     # an open input's signed volume means nothing: only the wrap's is said
     edges, before = ((f"{wrapped.open_edges} open and ", "") if wrapped.open_edges else
@@ -202,23 +220,55 @@ def _load_wrapped(path: Path, units: str | ModelConfig, vertices: np.ndarray,
                  f"they are; {edges}")
     line = (f"--repair: wrapped by fTetWild's winding-number test ({edges}"
             f"{wrapped.non_manifold_edges} non-manifold edges resolved, {wrapped.pinches} "
-            f"touching vertices split, {wrapped.faces_before} -> {wrapped.faces_after} "
-            f"faces, volume {before}{surface.volume_mm3:.0f} mm^3)")
+            f"touching vertices split, {_joined(parts, joined is not None)}"
+            f"{wrapped.faces_before} -> {len(out_f)} faces, volume {before}"
+            f"{surface.volume_mm3:.0f} mm^3)")
     return replace(surface, notes=(line, *surface.notes))
 
 
-def _load_wrapped_mesh(path: Path, units: str | ModelConfig, mesh: trimesh.Trimesh,
-                       wrap: bool) -> Surface:
-    """``_load_wrapped`` on the merged ``mesh`` as read."""
-    return _load_wrapped(path, units, np.asarray(mesh.vertices, dtype=np.float64),
-                         np.asarray(mesh.faces), wrap)
+def _joined(parts: int, joined: bool) -> str:
+    """The clause saying the shells were joined, if they were."""
+    return f"{parts} shells joined into one solid, " if joined else ""
+
+
+def _load_split(path: Path, units: str | ModelConfig, mesh: trimesh.Trimesh,
+                wrap: bool) -> Surface:
+    """A closed, non-manifold ``mesh`` (merged, as read): its parts touching along edges or
+    at points split into separate shells, and the shells joined into one solid by
+    manifold3d (exact: no fTetWild, no envelope); where the split leaves an edge of 3 or
+    more faces or a shell manifold3d cannot read, fTetWild's wrap (``_load_wrapped``)."""
+    raw_v = np.asarray(mesh.vertices, dtype=np.float64)
+    raw_f = np.asarray(mesh.faces, dtype=np.int64)
+    split_v, split_f, pinches = separate_shells(raw_v, raw_f, 0.0)
+    joined = (union_shells(split_v, split_f)
+              if not non_manifold_edges(split_f) and not open_edges(split_f) else None)
+    if joined is not None and len(joined[1]):
+        # the union touches itself where parts met along a line (its own vertices coincide
+        # there): merged like any input, those contacts are split apart again
+        union = trimesh.Trimesh(*joined, process=False)
+        clean_faces(union)
+        diagonal = float(np.linalg.norm(union.extents))
+        joined = separate_shells(np.asarray(union.vertices, dtype=np.float64),
+                                 np.asarray(union.faces), SPLIT_OFFSET_FAC * diagonal)[:2]
+    if joined is None or not len(joined[1]) or non_manifold_edges(joined[1]):
+        return _load_wrapped(path, units, raw_v, raw_f, wrap)
+    try:
+        surface = _load_as(path, units, *joined, "the joined surface")
+    except InputError:
+        return _load_wrapped(path, units, raw_v, raw_f, wrap)
+    parts = int(shells(split_f).max()) + 1
+    line = (f"--repair: split the surface where its parts touch ({non_manifold_edges(raw_f)} "
+            f"non-manifold edges, {pinches} touching vertices) and joined its {parts} shells "
+            f"into one solid with manifold3d ({len(raw_f)} -> {len(joined[1])} faces, volume "
+            f"{surface.volume_mm3:.0f} mm^3)")
+    return replace(surface, notes=(line, *surface.notes))
 
 
 #: the repair each repairable reason calls for
 _REPAIRS: dict[SurfaceReason, Callable[[Path, str | ModelConfig, trimesh.Trimesh, bool],
                                        Surface]] = {
     SurfaceReason.OPEN: _load_filled,
-    SurfaceReason.NON_MANIFOLD: _load_wrapped_mesh,
+    SurfaceReason.NON_MANIFOLD: _load_split,
 }
 
 

@@ -2,13 +2,14 @@
 tried and works.
 
 ``mesp slice`` refuses a surface that does not bound a solid; where its reason has a repair
-(``slicer.repair``), the repair is tried before the refusal is said: a stored wrap is read at
-once, a wrap to make runs in a child process given a few seconds (fTetWild's time grows with
-the input's faces, and it holds the interpreter while it runs, so only a process can be
-stopped). The fix then says ``re-run with --repair`` and what it changes, or what
-``--repair`` did and why that is still refused, or that it was not checked in time. The
-child stores its wrap (``slicer.wrap_cache``), so the ``--repair`` run that follows, or
-``mesp check``, uses that very wrap.
+(``slicer.repair``), the repair is tried before the refusal is said: a fill, a split and
+join or a stored wrap runs at once, a wrap to make runs in a child process given a few
+seconds (fTetWild's time grows with the input's faces, and it holds the interpreter while it
+runs, so only a process can be stopped). The fix then says ``re-run with --repair`` and
+what it changes, or what ``--repair`` did and why that is still refused, or that it was not
+checked in time. The child stores its wrap (``slicer.wrap_cache``), so the ``--repair`` run
+that follows, or ``mesp check``, uses that very wrap. What a repair that did not help tried
+is read from the refusal's typed field (``RepairRefused.tried``), not parsed from its words.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ from core.errors import InputError
 from slicer.config import ModelConfig
 from slicer.mesh_io import Surface
 from slicer.repair import WrapNotStored, load_repaired, repairable
-from slicer.surface_refusal import SurfaceReason, SurfaceRefused
+from slicer.surface_refusal import RepairRefused, SurfaceReason, SurfaceRefused
 
 # Seconds `mesp slice`'s refusal waits for the check that --repair works.
 OFFER_SECONDS = 30.0
@@ -67,16 +68,19 @@ def repair_within(path: str | Path, units: str | ModelConfig, seconds: float,
     if answer is None:
         return None
     if answer[0] == "refused":
-        return InputError(answer[1], answer[2])
+        return _refusal(*answer[1:])
     _, vertices, faces, notes = answer
     return Surface(vertices=vertices, faces=faces, source=Path(path), notes=notes)
 
 
 def _repair_child(path: Path, units: str | ModelConfig, reason: SurfaceReason | None,
                   queue: Any) -> None:
-    """Child process: ``load_repaired``'s surface (arrays and notes) or its refusal."""
+    """Child process: ``load_repaired``'s surface (arrays and notes) or its refusal (as
+    ``_refusal``'s arguments: an exception's own attributes do not survive the queue)."""
     try:
         surface = load_repaired(path, units, reason=reason)
+    except RepairRefused as exc:
+        queue.put(("refused", exc.problem, exc.fix, exc.name, exc.tried))
     except InputError as exc:
         queue.put(("refused", exc.problem, exc.fix))
     else:
@@ -109,6 +113,16 @@ def offer_fix(refusal: InputError, outcome: Surface | InputError | None, seconds
     return f"{use} (checked: it {outcome.notes[0].removeprefix('--repair: ')})"
 
 
+def _refusal(problem: str, fix: str, name: str | None = None,
+             tried: str | None = None) -> InputError:
+    """The refusal the child sent: a ``RepairRefused`` where it was one (``name`` and
+    ``tried`` given), else an ``InputError``."""
+    if name is not None and tried is not None:
+        return RepairRefused(name, tried, fix)
+    return InputError(problem, fix)
+
+
 def _tried(refused: InputError) -> str:
-    """``load_repaired``'s refusal, short: what it did and why the result is refused."""
-    return refused.problem.split(" after --repair ", 1)[-1]
+    """``load_repaired``'s refusal, short: what ``--repair`` did and why the result is
+    refused (``RepairRefused.tried``); any other refusal whole."""
+    return refused.tried if isinstance(refused, RepairRefused) else refused.problem

@@ -36,3 +36,19 @@ class SurfaceRefused(InputError):
     def __init__(self, problem: str, fix: str, reason: SurfaceReason) -> None:
         super().__init__(problem, fix)
         self.reason = reason
+
+
+class RepairRefused(InputError):
+    """``--repair``'s refusal of a surface it repaired that is still no solid
+    (``slicer.repair``).
+
+    Attributes:
+        name: the file's name.
+        tried: what ``--repair`` did and why the result is refused, one clause
+            ("filled 3 holes (...) and wrapped it with fTetWild (...)").
+    """
+
+    def __init__(self, name: str, tried: str, fix: str) -> None:
+        super().__init__(f"{name} is still refused after --repair {tried}", fix)
+        self.name = name
+        self.tried = tried

@@ -21,7 +21,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from core.tolerance import tol
+from slicer.shell_split import (
+    SPLIT_OFFSET_FAC,
+    non_manifold_edges,
+    open_edges,
+    separate_shells,
+)
 from slicer.solid_volume import signed_volume
 from slicer.tet_geometry import compact, orient_positive
 
@@ -33,13 +38,6 @@ EPSILON = 1e-3
 # Mesh-quality work is not needed for a boundary: few optimisation passes, a loose target.
 OPT_ITERATIONS = 5
 STOP_ENERGY = 100.0
-# Copies of a vertex where parts of the wrap touch are moved apart by this fraction of the
-# bounding-box diagonal (far above the merge tolerance, far below the envelope).
-SPLIT_OFFSET_FAC = 1e-5
-# Rounds of bisecting crowded edges (one edge per face each round) before the wrap is left
-# as it is and ``load_surface`` judges it.
-BISECT_ROUNDS = 4
-
 # The outward faces of a positively oriented tet: face k is opposite vertex k.
 _TET_FACES = np.array([(1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)])
 
@@ -82,157 +80,6 @@ def boundary_faces(tets: np.ndarray) -> np.ndarray:
     return faces[uses[inverse.ravel()] == 1]
 
 
-def non_manifold_edges(faces: np.ndarray) -> int:
-    """Edges of the (m, 3) ``faces`` used by 3 or more faces."""
-    return int(np.count_nonzero(_edge_uses(faces) > 2))
-
-
-def open_edges(faces: np.ndarray) -> int:
-    """Edges of the (m, 3) ``faces`` used by one face."""
-    return int(np.count_nonzero(_edge_uses(faces) == 1))
-
-
-def _edge_uses(faces: np.ndarray) -> np.ndarray:
-    """(e,) int64: how many of the (m, 3) ``faces`` use each undirected edge."""
-    edges = np.sort(np.asarray(faces)[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
-    _, uses = np.unique(edges, axis=0, return_counts=True)
-    return uses
-
-
-def split_pinches(vertices: np.ndarray, faces: np.ndarray, offset: float
-                  ) -> tuple[np.ndarray, np.ndarray, int]:
-    """Give each fan of faces around a vertex its own copy of it, so parts of a closed surface
-    that touch along an edge or at a point become separate shells.
-
-    Corners (face, vertex) are joined across edges used by exactly two faces; each connected
-    set of corners is one vertex of the result. A vertex split into k copies has each copy
-    moved ``offset`` (the input's unit) towards the centroid of its own faces, so the copies
-    stay apart when vertices are merged by position again.
-
-    Args:
-        vertices: (n, 3) float64. faces: (m, 3) int, closed.
-
-    Returns:
-        (vertices (n', 3) float64, faces (m, 3) int64, vertices split).
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    faces = np.asarray(faces, dtype=np.int64)
-    m = len(faces)
-    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    corner_a = (np.arange(3 * m) // 3) * 3 + np.tile([0, 1, 2], m)  # corner of the start
-    corner_b = (np.arange(3 * m) // 3) * 3 + np.tile([1, 2, 0], m)  # corner of the end
-    _, edge_id, uses = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True,
-                                 return_counts=True)
-    edge_id = edge_id.ravel()
-    manifold = np.flatnonzero(uses[edge_id] == 2)
-    order = manifold[np.argsort(edge_id[manifold], kind="stable")]
-    first, second = order[0::2], order[1::2]  # the two half-edges of each manifold edge
-    more_first, more_second = _radial_pairs(np.asarray(vertices, dtype=np.float64), faces,
-                                            directed, edge_id, uses)
-    first = np.concatenate([first, more_first])
-    second = np.concatenate([second, more_second])
-    same = directed[first, 0] == directed[second, 0]  # same start vertex: a flipped neighbour
-    # the corner of each end of `first` meets the corner of the same vertex in `second`
-    rows = np.concatenate([corner_a[first], corner_b[first]])
-    cols = np.concatenate([np.where(same, corner_a[second], corner_b[second]),
-                           np.where(same, corner_b[second], corner_a[second])])
-    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * m, 3 * m))
-    _, label = connected_components(graph, directed=False)
-    vertex_of = faces.ravel()
-    _, first_corner, new_id = np.unique(label, return_index=True, return_inverse=True)
-    original = vertex_of[first_corner]  # (n',) the input vertex of each new vertex
-    copies = np.bincount(original, minlength=len(vertices))
-    new_v = np.asarray(vertices, dtype=np.float64)[original].copy()
-    split = np.flatnonzero(copies[original] > 1)
-    if len(split):
-        centres = np.asarray(vertices, dtype=np.float64)[faces].mean(axis=1)  # (m, 3)
-        corner_face = np.arange(3 * m) // 3
-        count = np.bincount(new_id, minlength=len(original))
-        mean = np.column_stack([np.bincount(new_id, weights=centres[corner_face, k],
-                                            minlength=len(original)) for k in range(3)])
-        toward = mean / np.maximum(count, 1)[:, None] - new_v
-        length = np.linalg.norm(toward, axis=1)
-        new_v[split] += offset * toward[split] / np.maximum(length[split], tol.tiny)[:, None]
-    return new_v, new_id.reshape(m, 3).astype(np.int64), int(np.count_nonzero(copies > 1))
-
-
-def _radial_pairs(vertices: np.ndarray, faces: np.ndarray, directed: np.ndarray,
-                  edge_id: np.ndarray, uses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Around each edge of 4 or more faces, the pairs of half-edges whose faces bound the same
-    wedge of solid: faces sorted by angle around the edge, each joined to its neighbour on
-    the side its normal points away from. Returns two (p,) int64 half-edge indices."""
-    crowded = np.flatnonzero(uses[edge_id] > 2)
-    if not len(crowded):
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    edge = edge_id[crowded]
-    lo = np.minimum(directed[crowded, 0], directed[crowded, 1])
-    hi = np.maximum(directed[crowded, 0], directed[crowded, 1])
-    axis = vertices[hi] - vertices[lo]
-    axis /= np.maximum(np.linalg.norm(axis, axis=1), tol.tiny)[:, None]
-    face = crowded // 3
-    third = faces[face, (crowded % 3 + 2) % 3]
-    radial = vertices[third] - vertices[lo]
-    radial -= np.einsum("ij,ij->i", radial, axis)[:, None] * axis
-    # per edge, angles measured from the radial direction of its first half-edge
-    _, start, size = np.unique(edge, return_index=True, return_counts=True)
-    group = np.searchsorted(edge[start], edge)
-    ref_x = radial[start][group]
-    ref_y = np.cross(axis, ref_x)
-    angle = np.arctan2(np.einsum("ij,ij->i", radial, ref_y),
-                       np.einsum("ij,ij->i", radial, ref_x))
-    order = np.lexsort((angle, edge))
-    crowded, axis, radial, group = crowded[order], axis[order], radial[order], group[order]
-    begin = np.cumsum(size) - size  # first sorted position of each edge's group
-    position = np.arange(len(crowded))
-    after = begin[group] + (position - begin[group] + 1) % size[group]
-    tri = vertices[faces[crowded // 3]]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    # the solid lies on the side of increasing angle where the normal points against it
-    inside_ahead = np.einsum("ij,ij->i", normal, np.cross(axis, radial)) < 0
-    return crowded[inside_ahead], crowded[after[inside_ahead]]
-
-
-def bisect_crowded(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Split edges of 3 or more faces at their midpoints (each of their faces into two), at
-    most one edge per face: of a face's crowded edges only the lowest-numbered is a candidate,
-    and an edge is split where it is the candidate of all its faces (the lowest crowded edge
-    always is, so repeated calls split them all); ``split_pinches`` then parts the midpoint
-    where both ends of the edge are shared by the touching parts.
-
-    Args:
-        vertices: (n, 3) float64. faces: (m, 3) int.
-
-    Returns:
-        (vertices (n + e, 3) float64, faces (m + f, 3) int64).
-    """
-    faces = np.asarray(faces, dtype=np.int64)
-    directed = faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    _, edge_id, uses = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True,
-                                 return_counts=True)
-    edge_id = edge_id.ravel()
-    crowded = uses[edge_id] > 2  # (3m,) per half-edge
-    lowest = np.where(crowded, edge_id, len(uses)).reshape(-1, 3).min(axis=1)  # (m,) per face
-    blocked = np.zeros(len(uses), dtype=bool)
-    blocked[edge_id[crowded & (np.repeat(lowest, 3) != edge_id)]] = True
-    chosen = np.flatnonzero(crowded & ~blocked[edge_id])
-    if not len(chosen):
-        return np.asarray(vertices, dtype=np.float64), faces
-    edges, mid_of = np.unique(edge_id[chosen], return_inverse=True)
-    first = np.searchsorted(edge_id[chosen][np.argsort(edge_id[chosen], kind="stable")],
-                            edges)
-    ends = directed[chosen[np.argsort(edge_id[chosen], kind="stable")][first]]
-    mids = 0.5 * (vertices[ends[:, 0]] + vertices[ends[:, 1]])
-    mid = len(vertices) + mid_of
-    face, k = chosen // 3, chosen % 3
-    a, b, c = faces[face, k], faces[face, (k + 1) % 3], faces[face, (k + 2) % 3]
-    keep = np.ones(len(faces), dtype=bool)
-    keep[face] = False
-    halves = np.vstack([np.column_stack([a, mid, c]), np.column_stack([mid, b, c])])
-    return (np.vstack([np.asarray(vertices, dtype=np.float64), mids]),
-            np.vstack([faces[keep], halves]))
-
 
 def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, Wrap]:
     """The boundary of fTetWild's winding-number tet mesh of ``vertices`` (n, 3) float64
@@ -258,13 +105,7 @@ def wrap(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarra
     tets = orient_positive(points, tets)
     out_v, out_f = compact(points, boundary_faces(tets))
     diagonal = float(np.linalg.norm(np.ptp(out_v, axis=0)))
-    out_v, out_f, pinches = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
-    for _ in range(BISECT_ROUNDS):  # touching along an edge whose ends the parts share
-        if not non_manifold_edges(out_f):
-            break
-        out_v, out_f = bisect_crowded(out_v, out_f)
-        out_v, out_f, more = split_pinches(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
-        pinches += more
+    out_v, out_f, pinches = separate_shells(out_v, out_f, SPLIT_OFFSET_FAC * diagonal)
     return out_v, out_f, Wrap(non_manifold_edges(faces), open_edges(faces), len(faces),
                               len(out_f),
                               signed_volume(np.asarray(vertices, dtype=np.float64), faces),

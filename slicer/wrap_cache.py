@@ -30,7 +30,8 @@ from slicer.tet_cache import cache_dir
 from slicer.winding_repair import Wrap
 
 #: the code a stored wrap depends on (files of this package)
-WRAP_SOURCES = ("body_wrap.py", "winding_repair.py", "tet_geometry.py", "solid_volume.py")
+WRAP_SOURCES = ("body_wrap.py", "winding_repair.py", "shell_split.py", "tet_geometry.py",
+                "solid_volume.py")
 
 
 def wrap_key(vertices: np.ndarray, faces: np.ndarray) -> str:

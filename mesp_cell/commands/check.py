@@ -11,8 +11,8 @@ from typing import Any
 
 from core.errors import InputError
 
-# Of the seconds `mesp check` answers in, those the check that --repair works may take (a
-# stored wrap is read at once; fTetWild's time grows with the input's faces).
+# Of the seconds `mesp check` answers in, those a wrap by fTetWild may take to check that
+# --repair works (a fill, a split and join, or a stored wrap is made or read at once).
 REPAIR_SECONDS = 10.0
 
 HELP = """\

@@ -133,19 +133,25 @@ def test_mesp_check_names_the_mesh_problem_and_the_checked_repair(
     assert len(err) == 1 and err[0].startswith("mesp: error: cup.stl is not watertight")
 
 
-def test_mesp_check_offers_the_wrap_of_touching_cubes(
-        tmp_path: Path, capsys: pytest.CaptureFixture[str],
-        monkeypatch: pytest.MonkeyPatch) -> None:
-    from mesp_cell.commands import check
-    from slicer import tet_cache
+def _cube_with_a_fin(path: Path, size: float) -> Path:
+    """A closed cube with one triangle standing on a top edge: open, and the fill leaves it
+    refused, so only fTetWild's wrap repairs it."""
+    box = trimesh.creation.box(extents=(size, size, size))
+    edge = np.flatnonzero(np.isclose(box.vertices[:, 2], size / 2)
+                          & np.isclose(box.vertices[:, 0], size / 2))
+    v = np.vstack([box.vertices, [[size / 2, 0.0, 1.5 * size]]])
+    trimesh.Trimesh(v, np.vstack([box.faces, [[edge[0], edge[1], 8]]]),
+                    process=False).export(path)
+    return path
 
-    monkeypatch.setenv(tet_cache.CACHE_ENV, str(tmp_path / "cache"))
-    monkeypatch.setattr(check, "REPAIR_SECONDS", 600.0)  # a loaded host; 10 s in use
+
+def test_mesp_check_offers_the_split_of_touching_cubes(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     model = _touching_cubes(tmp_path / "cubes.stl", 20.0)
     assert main(["check", str(model), "--figure", str(tmp_path / "cubes.png")]) == 1
     mesh = capsys.readouterr().out.splitlines()[0]
     assert "mesh: PROBLEM: cubes.stl is not watertight (1 non-manifold edges)" in mesh
-    assert "slice with --repair (checked: it wrapped by fTetWild's winding-number test" in mesh
+    assert "slice with --repair (checked: it split the surface where its parts touch" in mesh
 
 
 def test_mesp_check_says_when_the_repair_was_not_checked(
@@ -156,9 +162,9 @@ def test_mesp_check_says_when_the_repair_was_not_checked(
 
     monkeypatch.setenv(tet_cache.CACHE_ENV, str(tmp_path / "cache"))  # no stored wrap
     monkeypatch.setattr(check, "REPAIR_SECONDS", 0.0)
-    model = _touching_cubes(tmp_path / "cubes.stl", 20.0)
-    assert main(["check", str(model), "--figure", str(tmp_path / "cubes.png")]) == 2
+    model = _cube_with_a_fin(tmp_path / "fin.stl", 20.0)
+    assert main(["check", str(model), "--figure", str(tmp_path / "fin.png")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "(1 non-manifold edges)" in err[0]
+    assert len(err) == 1 and "(2 open edges" in err[0]
     assert "or slice with --repair (fTetWild's wrap: not checked here" in err[0]
     assert "checked: it" not in err[0]

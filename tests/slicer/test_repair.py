@@ -14,16 +14,10 @@ from mesp_cell.cli import main
 from slicer import tet_cache, wrap_cache
 from slicer.mesh_io import load_surface
 from slicer.repair import fill_holes, load_repaired, repairable
-from slicer.repair_offer import repair_offer
-from slicer.surface_refusal import SurfaceReason, SurfaceRefused
-from slicer.winding_repair import (
-    Wrap,
-    bisect_crowded,
-    boundary_faces,
-    non_manifold_edges,
-    split_pinches,
-    wrap,
-)
+from slicer.repair_offer import _refusal, offer_fix, repair_offer
+from slicer.shell_split import non_manifold_edges
+from slicer.surface_refusal import RepairRefused, SurfaceReason, SurfaceRefused
+from slicer.winding_repair import Wrap, boundary_faces, wrap
 
 # Seconds a test gives the check that --repair works (the host may be loaded; the 30 s the
 # refusal waits is the product's limit, not what these tests measure).
@@ -126,21 +120,24 @@ def test_boundary_faces_of_one_tet_point_outwards() -> None:
     assert trimesh.Trimesh(v, f, process=False).volume == pytest.approx(1 / 6)
 
 
-def test_non_manifold_refusal_offers_and_applies_the_wrap(tmp_path: Path) -> None:
+def test_non_manifold_refusal_offers_and_applies_the_split(tmp_path: Path) -> None:
     path = tmp_path / "stacked.obj"
     _stacked_boxes(20.0).export(path)
     with pytest.raises(InputError) as refused:
         load_surface(path)
     assert "non-manifold edges" in refused.value.problem
-    offer = repair_offer(path, "mm", refused.value, seconds=WAIT)
-    assert "re-run with --repair (checked: it wrapped by fTetWild" in offer.one_line()
+    offer = repair_offer(path, "mm", refused.value, seconds=0.0)  # no fTetWild: at once
+    assert "re-run with --repair (checked: it split the surface" in offer.one_line()
     surface = load_repaired(path)
     mesh = surface.as_trimesh()
     assert mesh.is_watertight and non_manifold_edges(surface.faces) == 0
-    assert surface.volume_mm3 == pytest.approx(16000.0, rel=0.03)
-    assert surface.notes[0].startswith("--repair: wrapped by fTetWild's winding-number test (")
-    assert "non-manifold edges resolved" in surface.notes[0]
-    assert "volume 16000 -> " in surface.notes[0]
+    assert mesh.body_count == 1  # the two boxes joined into one 20 x 20 x 40 mm solid
+    assert surface.volume_mm3 == pytest.approx(16000.0, rel=1e-9)
+    assert np.allclose(surface.bbox_mm, (20.0, 20.0, 40.0))
+    assert surface.notes[0] == (
+        "--repair: split the surface where its parts touch (4 non-manifold edges, 4 touching "
+        f"vertices) and joined its 2 shells into one solid with manifold3d (24 -> "
+        f"{len(surface.faces)} faces, volume 16000 mm^3)")
 
 
 def test_a_soup_is_still_refused(tmp_path: Path) -> None:
@@ -162,40 +159,10 @@ def test_a_soup_is_still_refused(tmp_path: Path) -> None:
     assert "its faces enclose nothing (open sheets, a polygon soup)" in still.value.fix
 
 
-def test_boxes_touching_along_an_edge_become_two_shells() -> None:
-    low = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
-    high = low.copy()
-    high.apply_translation([10.0, 10.0, 0.0])  # shares the vertical edge x = y = 5
-    both = low + high
-    both.merge_vertices()
-    assert non_manifold_edges(np.asarray(both.faces)) == 1
-    v, f, split = split_pinches(np.asarray(both.vertices), np.asarray(both.faces), 1e-4)
-    assert split == 2 and len(v) == len(both.vertices) + 2
-    apart = trimesh.Trimesh(v, f, process=False)
-    assert apart.is_watertight and apart.is_winding_consistent
-    assert non_manifold_edges(f) == 0 and apart.body_count == 2
-    assert apart.volume == pytest.approx(2000.0, rel=1e-4)
-
-
-def test_bisecting_a_crowded_edge_keeps_the_surface_closed() -> None:
-    low = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
-    high = low.copy()
-    high.apply_translation([10.0, 10.0, 0.0])
-    both = low + high
-    both.merge_vertices()
-    v, f = bisect_crowded(np.asarray(both.vertices), np.asarray(both.faces))
-    assert len(v) == len(both.vertices) + 1 and len(f) == len(both.faces) + 4
-    assert non_manifold_edges(f) == 2  # the two halves of the shared edge
-    v, f, split = split_pinches(v, f, 1e-4)
-    apart = trimesh.Trimesh(v, f, process=False)
-    assert split == 3 and apart.is_watertight and apart.body_count == 2
-    assert apart.volume == pytest.approx(2000.0, rel=1e-4)
-
-
 def test_a_wrap_past_its_time_is_not_offered_as_checked(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    path = tmp_path / "stacked.obj"
-    _stacked_boxes(20.0).export(path)
+    path = tmp_path / "fin.stl"
+    _cube_with_a_fin(20.0).export(path)
     with pytest.raises(InputError) as refused:
         load_surface(path)
     monkeypatch.setenv(tet_cache.CACHE_ENV, str(tmp_path / "cache"))  # nothing stored
@@ -236,14 +203,40 @@ def test_the_repair_is_picked_by_the_reason_not_the_words() -> None:
     assert repair_offer("m.stl", "mm", plain) is plain
 
 
-def test_cubes_sharing_an_edge_are_wrapped_into_two_shells(tmp_path: Path) -> None:
+def test_cubes_sharing_an_edge_are_split_into_two_shells(tmp_path: Path) -> None:
     path = tmp_path / "touching.stl"
     _cubes_sharing_an_edge(10.0).export(path)
     surface = load_repaired(path)
     mesh = surface.as_trimesh()
-    assert mesh.is_watertight and mesh.body_count == 2
-    assert surface.volume_mm3 == pytest.approx(2000.0, rel=0.03)
-    assert "(1 non-manifold edges resolved" in surface.notes[0]
+    assert mesh.is_watertight and mesh.is_winding_consistent and mesh.body_count == 2
+    assert non_manifold_edges(surface.faces) == 0
+    assert surface.volume_mm3 == pytest.approx(2000.0, rel=1e-4)
+    assert "(1 non-manifold edges, 2 touching vertices)" in surface.notes[0]
+
+
+def test_overlapping_boxes_sharing_an_edge_become_their_union(tmp_path: Path) -> None:
+    """Box B turned 100 deg about box A's vertical corner edge, which is B's edge too (4
+    faces): B reaches 10 deg into A. The repair is their union (manifold3d's own)."""
+    a = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+    a.apply_translation([-5.0, -5.0, 0.0])  # corner edge on the z axis, A at x, y < 0
+    b = a.copy()
+    b.apply_transform(trimesh.transformations.rotation_matrix(np.radians(280.0), [0, 0, 1]))
+    both = a + b
+    both.merge_vertices()
+    assert non_manifold_edges(np.asarray(both.faces)) == 1
+    path = tmp_path / "overlap.stl"
+    both.export(path)
+    with pytest.raises(SurfaceRefused) as refused:
+        load_surface(path)
+    assert refused.value.reason is SurfaceReason.NON_MANIFOLD
+    surface = load_repaired(path)
+    mesh = surface.as_trimesh()
+    assert mesh.is_watertight and mesh.is_winding_consistent
+    assert non_manifold_edges(surface.faces) == 0
+    overlap = trimesh.boolean.intersection([a, b], engine="manifold").volume
+    assert overlap > 10.0  # a real overlap, counted once
+    assert surface.volume_mm3 == pytest.approx(2000.0 - overlap, rel=1e-4)
+    assert "joined its 2 shells into one solid" in surface.notes[0]
 
 
 def test_an_open_surface_the_fill_cannot_close_is_wrapped(tmp_path: Path) -> None:
@@ -277,8 +270,8 @@ def test_a_repeated_repair_reads_the_stored_wrap(tmp_path: Path,
                                                  monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(tet_cache.CACHE_ENV, str(tmp_path / "cache"))
     calls = _counting_wrap(monkeypatch)
-    path = tmp_path / "stacked.obj"
-    _stacked_boxes(20.0).export(path)
+    path = tmp_path / "fin.stl"
+    _cube_with_a_fin(20.0).export(path)
     first = load_repaired(path)
     again = load_repaired(path, "cm")  # other units: the same wrap, scaled
     assert len(calls) == 1
@@ -291,8 +284,8 @@ def test_without_the_cache_every_repair_wraps_again(tmp_path: Path,
                                                     monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(tet_cache.CACHE_ENV, "off")
     calls = _counting_wrap(monkeypatch)
-    path = tmp_path / "stacked.obj"
-    _stacked_boxes(20.0).export(path)
+    path = tmp_path / "fin.stl"
+    _cube_with_a_fin(20.0).export(path)
     load_repaired(path)
     load_repaired(path)
     assert len(calls) == 2
@@ -301,42 +294,51 @@ def test_without_the_cache_every_repair_wraps_again(tmp_path: Path,
 def test_the_offer_checks_wrap_is_the_one_repair_uses(tmp_path: Path,
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv(tet_cache.CACHE_ENV, str(tmp_path / "cache"))
-    path = tmp_path / "stacked.obj"
-    _stacked_boxes(20.0).export(path)
+    path = tmp_path / "fin.stl"
+    _cube_with_a_fin(20.0).export(path)
     with pytest.raises(InputError) as refused:
         load_surface(path)
     offer = repair_offer(path, "mm", refused.value, seconds=WAIT)  # wraps in a child
-    assert isinstance(offer, SurfaceRefused) and offer.reason is SurfaceReason.NON_MANIFOLD
+    assert isinstance(offer, SurfaceRefused) and offer.reason is SurfaceReason.OPEN
     calls = _counting_wrap(monkeypatch)
     surface = load_repaired(path)
     assert calls == []  # read back, not wrapped again
     assert f"(checked: it {surface.notes[0].removeprefix('--repair: ')})" in offer.fix
 
 
-def test_a_face_with_two_crowded_edges_gets_both_split_in_two_rounds() -> None:
-    """Cube A with cubes touching two of its top edges: a face of A holds both crowded
-    edges; each round splits one of them (the lowest), so neither stays blocked."""
-    def cube(at: tuple[float, float, float]) -> trimesh.Trimesh:
-        box = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
-        box.apply_translation(at)
-        return box
+def test_the_offer_reads_what_repair_tried_from_its_type_not_its_words() -> None:
+    refusal = SurfaceRefused("m.stl is not watertight (3 open edges)", "close it",
+                             SurfaceReason.OPEN)
+    tried = RepairRefused("cup after --repair v2.stl", "filled 1 hole (a b c)", "x")
+    assert offer_fix(refusal, tried, 30.0) == (
+        "close it (--repair was tried: filled 1 hole (a b c))")
+    other = InputError("the --repair check ended without an answer", "slice with --repair")
+    assert offer_fix(refusal, other, 30.0) == (
+        "close it (--repair was tried: the --repair check ended without an answer)")
 
-    both = cube((0.0, 0.0, 0.0)) + cube((10.0, 0.0, 10.0)) + cube((0.0, 10.0, 10.0))
-    both.merge_vertices()
-    v, f = np.asarray(both.vertices, dtype=np.float64), np.asarray(both.faces)
-    uses = {}
-    for a, b in np.sort(f[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1):
-        uses[(a, b)] = uses.get((a, b), 0) + 1
-    face = next(t for t in f if sum(uses[tuple(sorted((t[k], t[(k + 1) % 3])))] > 2
-                                    for k in range(3)) == 2)
-    crowded = [tuple(sorted((face[k], face[(k + 1) % 3]))) for k in range(3)
-               if uses[tuple(sorted((face[k], face[(k + 1) % 3])))] > 2]
-    mids = [0.5 * (v[a] + v[b]) for a, b in crowded]
 
-    def split_at(points: np.ndarray) -> list[bool]:
-        return [bool(np.any(np.linalg.norm(points - m, axis=1) < 1e-9)) for m in mids]
+def test_a_refusal_sent_by_the_check_process_keeps_its_type() -> None:
+    sent = RepairRefused("m.stl", "wrapped it: no inside", "fix")
+    back = _refusal(sent.problem, sent.fix, sent.name, sent.tried)
+    assert isinstance(back, RepairRefused) and back.tried == sent.tried
+    assert back.one_line() == sent.one_line()
+    plain = _refusal("m.stl: ended", "fix")
+    assert type(plain) is InputError and plain.one_line() == "m.stl: ended; fix"
 
-    v1, f1 = bisect_crowded(v, f)
-    assert sorted(split_at(v1)) == [False, True]  # one per face and round
-    v2, _ = bisect_crowded(v1, f1)
-    assert split_at(v2) == [True, True]
+
+def test_a_wrap_and_the_bodies_kept_beside_it_are_joined(tmp_path: Path) -> None:
+    """The finned cube (wrapped) and a closed cube pushed half into it (kept as it is): two
+    overlapping shells, joined into one solid that counts the overlap once."""
+    fin = _cube_with_a_fin(20.0)
+    kept = trimesh.creation.box(extents=(10.0, 10.0, 10.0))
+    kept.apply_translation([10.0, 0.0, 0.0])  # x 5..15: half inside the cube's x -10..10
+    both = trimesh.Trimesh(np.vstack([fin.vertices, kept.vertices]),
+                           np.vstack([fin.faces, kept.faces + len(fin.vertices)]), process=False)
+    path = tmp_path / "fin_and_cube.stl"
+    both.export(path)
+    surface = load_repaired(path)
+    mesh = surface.as_trimesh()
+    assert mesh.is_watertight and mesh.body_count == 1
+    assert surface.volume_mm3 == pytest.approx(8500.0, rel=0.03)
+    assert "(1 of 2 bodies, the others kept as they are; " in surface.notes[0]
+    assert "2 shells joined into one solid, " in surface.notes[0]
