@@ -25,6 +25,7 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
+import trimesh
 from numpy.typing import NDArray
 from scipy.sparse.linalg import LinearOperator, eigsh
 
@@ -36,6 +37,7 @@ from slicer.toolpath.isolines import (
     lines_from_segments,
     periodic_face_segments,
 )
+from slicer.toolpath.layer_nearest import inside_barycentric
 from slicer.toolpath.lines import SurfaceLines, empty_lines, merge_lines
 from slicer.toolpath.stripe_trim import CONVERGE_TRIM, trim_converging
 from slicer.toolpath.surface import (
@@ -51,6 +53,8 @@ from slicer.toolpath.surface import (
     vertex_normals,
 )
 
+FINE_EDGE = 0.5  # x spacing: the field is solved on edges at most this long (median) ...
+FINE_LEVELS = 2  # ... splitting the layer at most this many times
 EIGEN_SHIFT = 1e-6  # sigma of the shift-invert, relative to the mean diagonal of A over M
 ARPACK_RTOL = 1e-6  # relative accuracy of ARPACK's eigenpair (the ``arpack`` alternative)
 
@@ -295,9 +299,41 @@ def per_component(fn: LineFn, vertices: NDArray[np.float64], faces: NDArray[np.i
     return merge_lines(parts, maps)
 
 
+def fine_mesh(vertices: NDArray[np.float64], faces: NDArray[np.int64], spacing: float
+              ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
+    """The layer split (midpoints, 1 to 4) until its median edge is at most FINE_EDGE x
+    ``spacing`` (at most FINE_LEVELS times): vertices (n', 3) mm, faces (m', 3) and each
+    new face's face of the given mesh (m',). The new vertices lie in their parent's plane."""
+    v, f = np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    parent = np.arange(len(f))
+    for _ in range(FINE_LEVELS):  # a level or two
+        edge = np.linalg.norm(v[f] - v[np.roll(f, 1, axis=1)], axis=2)
+        if len(f) == 0 or float(np.median(edge)) <= FINE_EDGE * spacing:
+            break
+        v, f_new, index = trimesh.remesh.subdivide(v, f, return_index=True)
+        owner = np.empty(len(f_new), dtype=np.int64)
+        for old, new in index.items():  # loop over parent faces: a dict lookup each
+            owner[new] = old
+        parent, f = parent[owner], np.asarray(f_new, dtype=np.int64)
+    return v, f, parent
+
+
+def _on_parent(lines: SurfaceLines, vertices: NDArray[np.float64], faces: NDArray[np.int64],
+               parent: NDArray[np.int64]) -> SurfaceLines:
+    """Lines found on ``fine_mesh`` put on the mesh it split (faces and barycentrics)."""
+    face = parent[lines.face].astype(np.int32)
+    bary = inside_barycentric(lines.points, vertices, faces.astype(np.int32), face)
+    points = np.einsum("pk,pkj->pj", bary, vertices[faces[face]])
+    return SurfaceLines(points=points, face=face, bary=bary, line=lines.line,
+                        closed=lines.closed)
+
+
 def _stripe_lines_one(vertices: NDArray[np.float64], faces: NDArray[np.int64],
                       direction: NDArray[np.float64], spacing: float,
                       join_branches: bool = True, trim: bool = True) -> SurfaceLines:
+    coarse_v, coarse_f = vertices, faces
+    vertices, faces, parent = fine_mesh(vertices, faces, spacing)
+    direction = direction[parent]
     field = stripe_field(vertices, faces, direction, spacing)
     fp = _face_phases(vertices, faces, field.phase, field.z, 2.0 * np.pi / spacing)
     period = 2.0 * np.pi
@@ -320,7 +356,7 @@ def _stripe_lines_one(vertices: NDArray[np.float64], faces: NDArray[np.int64],
             seg = np.concatenate([seg, bseg])
     if len(seg) == 0:
         return empty_lines()
-    lines = lines_from_segments(nodes, seg)
+    lines = _on_parent(lines_from_segments(nodes, seg), coarse_v, coarse_f, parent)
     if not trim or CONVERGE_TRIM <= 0:
         return lines
     return trim_converging(lines, spacing, CONVERGE_TRIM)
