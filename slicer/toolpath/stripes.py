@@ -12,7 +12,11 @@ spread it, which is what places the branch points. Lines are the crests psi = 2 
 extracted face by face from the phases unwrapped with the per-edge jumps. Faces around which
 the jumps add up to a whole period hold a branch point: there the stripe running past is joined
 straight through (the two stripe ends farthest apart) and the stripe that stops simply ends;
-faces where the line field itself is singular emit nothing. Stripe ends that converge on a
+faces where the line field itself is singular emit nothing. The field is solved on the layer
+split at its edge midpoints until the edges are at most half the spacing (``stripe_mesh``;
+a coarser mesh cannot resolve the period: the crests interpolated across faces as wide as a
+stripe lie off the middle of their neighbours), and the lines are put back on the layer's own
+faces (each split face lies in its parent's plane). Stripe ends that converge on a
 longer neighbour are cut back (``stripe_trim``); the Poisson alternative of the paper's
 comparison is ``poisson_stripes``. Measurements behind these choices: docs/benchmarks.md
 ("Moved from docstrings", stripes).
@@ -25,7 +29,6 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
-import trimesh
 from numpy.typing import NDArray
 from scipy.sparse.linalg import LinearOperator, eigsh
 
@@ -37,8 +40,8 @@ from slicer.toolpath.isolines import (
     lines_from_segments,
     periodic_face_segments,
 )
-from slicer.toolpath.layer_nearest import inside_barycentric
 from slicer.toolpath.lines import SurfaceLines, empty_lines, merge_lines
+from slicer.toolpath.stripe_mesh import fine_mesh, on_parent
 from slicer.toolpath.stripe_trim import CONVERGE_TRIM, trim_converging
 from slicer.toolpath.surface import (
     check_mesh,
@@ -53,8 +56,6 @@ from slicer.toolpath.surface import (
     vertex_normals,
 )
 
-FINE_EDGE = 0.5  # x spacing: the field is solved on edges at most this long (median) ...
-FINE_LEVELS = 2  # ... splitting the layer at most this many times
 EIGEN_SHIFT = 1e-6  # sigma of the shift-invert, relative to the mean diagonal of A over M
 ARPACK_RTOL = 1e-6  # relative accuracy of ARPACK's eigenpair (the ``arpack`` alternative)
 
@@ -299,35 +300,6 @@ def per_component(fn: LineFn, vertices: NDArray[np.float64], faces: NDArray[np.i
     return merge_lines(parts, maps)
 
 
-def fine_mesh(vertices: NDArray[np.float64], faces: NDArray[np.int64], spacing: float
-              ) -> tuple[NDArray[np.float64], NDArray[np.int64], NDArray[np.int64]]:
-    """The layer split (midpoints, 1 to 4) until its median edge is at most FINE_EDGE x
-    ``spacing`` (at most FINE_LEVELS times): vertices (n', 3) mm, faces (m', 3) and each
-    new face's face of the given mesh (m',). The new vertices lie in their parent's plane."""
-    v, f = np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
-    parent = np.arange(len(f))
-    for _ in range(FINE_LEVELS):  # a level or two
-        edge = np.linalg.norm(v[f] - v[np.roll(f, 1, axis=1)], axis=2)
-        if len(f) == 0 or float(np.median(edge)) <= FINE_EDGE * spacing:
-            break
-        v, f_new, index = trimesh.remesh.subdivide(v, f, return_index=True)
-        owner = np.empty(len(f_new), dtype=np.int64)
-        for old, new in index.items():  # loop over parent faces: a dict lookup each
-            owner[new] = old
-        parent, f = parent[owner], np.asarray(f_new, dtype=np.int64)
-    return v, f, parent
-
-
-def _on_parent(lines: SurfaceLines, vertices: NDArray[np.float64], faces: NDArray[np.int64],
-               parent: NDArray[np.int64]) -> SurfaceLines:
-    """Lines found on ``fine_mesh`` put on the mesh it split (faces and barycentrics)."""
-    face = parent[lines.face].astype(np.int32)
-    bary = inside_barycentric(lines.points, vertices, faces.astype(np.int32), face)
-    points = np.einsum("pk,pkj->pj", bary, vertices[faces[face]])
-    return SurfaceLines(points=points, face=face, bary=bary, line=lines.line,
-                        closed=lines.closed)
-
-
 def _stripe_lines_one(vertices: NDArray[np.float64], faces: NDArray[np.int64],
                       direction: NDArray[np.float64], spacing: float,
                       join_branches: bool = True, trim: bool = True) -> SurfaceLines:
@@ -356,7 +328,7 @@ def _stripe_lines_one(vertices: NDArray[np.float64], faces: NDArray[np.int64],
             seg = np.concatenate([seg, bseg])
     if len(seg) == 0:
         return empty_lines()
-    lines = _on_parent(lines_from_segments(nodes, seg), coarse_v, coarse_f, parent)
+    lines = on_parent(lines_from_segments(nodes, seg), coarse_v, coarse_f, parent)
     if not trim or CONVERGE_TRIM <= 0:
         return lines
     return trim_converging(lines, spacing, CONVERGE_TRIM)
