@@ -59,6 +59,8 @@ def _split(v: NDArray[np.float64], f: NDArray[np.int64]
 def on_parent(lines: SurfaceLines, vertices: NDArray[np.float64], faces: NDArray[np.int64],
                parent: NDArray[np.int64]) -> SurfaceLines:
     """Lines found on ``fine_mesh`` put on the mesh it split (faces and barycentrics)."""
+    if len(parent) == len(faces):  # not split: the lines are already on the layer
+        return lines
     face = parent[lines.face].astype(np.int32)
     bary = inside_barycentric(lines.points, vertices, faces.astype(np.int32), face)
     points = np.einsum("pk,pkj->pj", bary, vertices[faces[face]])
