@@ -15,7 +15,8 @@ slowed the arm (``sync_flow``, default on);
 ``stop``; ``reset`` clears a latched e-stop; ``status`` answers the latched e-stop (reason,
 time), the motion mode and the last stream's stop.
 Motions run in one motion thread; their end is published as a ``StreamEvent`` on
-``robot/event``. Interlocks, checked before every servo sample: no e-stop,
+``robot/event``. The state is published at ``state_hz`` while the arm moves or the screw runs,
+at the idle rate otherwise (``idle_pace``; at least twice the controller's watchdog rate). Interlocks, checked before every servo sample: no e-stop,
 the extruder and supervisor processes present, and the extruder running (fresh state) wherever
 the trajectory deposits, delivering the commanded flow (``interlock``, ``flow_check``).
 Losing the extruder's liveliness token stops the stream at once. Whenever a motion stops early,
@@ -55,6 +56,7 @@ from mesp_cell.messages import (
 from mesp_cell.nodes.extruder_switch import Switcher, wall_clock
 from mesp_cell.nodes.flow_check import FlowCheck, FlowResponse
 from mesp_cell.nodes.flow_sync import FLOW_INTERVAL_S, FlowSync
+from mesp_cell.nodes.idle_pace import IDLE_HZ, Pace
 from mesp_cell.nodes.interlock import Interlock, MustRun
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from mesp_cell.nodes.print_ledger import Ledger
@@ -116,7 +118,10 @@ class RobotNode(RobotMoves, LifecycleNode):
         self.switcher = Switcher(self._send_switch, clock.now if clock else wall_clock,
                                  self.servo.time_scale, clock,
                                  getattr(self.driver, "sim_now", None))
-        self.state_period = 1.0 / float(p.get("state_hz", 100.0))
+        # the state loop kicks the controller's watchdog: at rest too, twice as often as it
+        # needs
+        self.pace = Pace(float(p.get("state_hz", 100.0)),
+                         max(IDLE_HZ, 2.0 * self.servo.watchdog_hz))
         self.plan: StreamPlan | None = None
         self.job_id = ""
         self.job_dir: Path | None = None
@@ -137,8 +142,7 @@ class RobotNode(RobotMoves, LifecycleNode):
 
     def on_activate(self) -> None:
         assert self.bus is not None
-        self.bus.subscribe(self.extruder_name, "state", ExtruderState,
-                           self.interlock.on_extruder)
+        self.bus.subscribe(self.extruder_name, "state", ExtruderState, self._on_extruder)
         self.bus.subscribe("estop", "estop", EStop, self._on_estop)
         self.bus.watch_presence(self._on_presence)
         self.bus.serve(self._on_command)
@@ -173,6 +177,17 @@ class RobotNode(RobotMoves, LifecycleNode):
             # A killed process's token may be withdrawn after its restarted successor's
             # appeared: ask the bus again, so the successor is not taken for gone.
             self.spawn(lambda: self._recheck(node), f"recheck-{node}")
+
+    def _on_extruder(self, msg: ExtruderState) -> None:
+        was = self.interlock.ext
+        self.interlock.on_extruder(msg)
+        if msg.running and not (was is not None and was.running):
+            self.pace.wake()  # the screw runs: the extruder node judges this node's state
+
+    def _busy_pace(self) -> bool:
+        """The state goes out at the full rate: the arm moves or the screw runs."""
+        ext = self.interlock.ext
+        return self._in_motion.is_set() or (ext is not None and ext.running)
 
     def _recheck(self, node: str) -> None:
         time.sleep(0.3)
@@ -335,6 +350,7 @@ class RobotNode(RobotMoves, LifecycleNode):
 
         def run() -> None:
             self.mode = RobotMode.STREAMING
+            self.pace.wake()
             try:
                 result = stream.run()
             except Exception as exc:  # the end event must go out whatever happened
@@ -357,6 +373,7 @@ class RobotNode(RobotMoves, LifecycleNode):
             log.info("stream of %s: oldest extruder state while depositing %.0f ms", job,
                      self.interlock.max_age * 1000)
             self._in_motion.clear()
+            self.pace.wake()
             kind = StreamEnd.DONE if result.done else StreamEnd.STOPPED
             self._event(StreamEvent(job, kind, result.reason, result.last_sample, result.stop_t))
 
@@ -372,6 +389,8 @@ class RobotNode(RobotMoves, LifecycleNode):
     def _publish_state(self) -> None:
         next_t = time.monotonic()
         while not self.stopping.is_set() and self.bus is not None:
+            self.pace.begin()
+            busy = self._busy_pace()
             d = self.driver
             q, qd = np.degrees(d.joints()), np.degrees(d.joint_speeds())
             stream, plan = self.stream, self.plan
@@ -387,8 +406,7 @@ class RobotNode(RobotMoves, LifecycleNode):
                 d.kick_watchdog()
             elif not self._busy():
                 d.reconnect()
-            next_t += self.state_period
-            time.sleep(max(0.0, next_t - time.monotonic()))
+            next_t = self.pace.wait(next_t, busy, time.monotonic())
 
 
 def main(argv: Sequence[str] | None = None) -> int:
