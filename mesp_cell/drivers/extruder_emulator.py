@@ -148,7 +148,7 @@ class ModbusEmulator:
                 rest = min(rest, max(self.cycle_s, self._inject_until - now))
             try:
                 await asyncio.wait_for(written.wait(), rest)
-            except asyncio.TimeoutError:
+            except TimeoutError:
                 pass
 
     async def serve(self) -> None:

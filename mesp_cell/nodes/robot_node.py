@@ -16,9 +16,10 @@ slowed the arm (``sync_flow``, default on);
 time), the motion mode and the last stream's stop.
 Motions run in one motion thread; their end is published as a ``StreamEvent`` on
 ``robot/event``. The state is published at ``state_hz`` while the arm moves or the screw runs,
-at the idle rate otherwise (``idle_pace``; at least twice the controller's watchdog rate). Interlocks, checked before every servo sample: no e-stop,
-the extruder and supervisor processes present, and the extruder running (fresh state) wherever
-the trajectory deposits, delivering the commanded flow (``interlock``, ``flow_check``).
+at the idle rate otherwise (``idle_pace``; at least twice the controller's watchdog rate).
+Interlocks, checked before every servo sample: no e-stop, the extruder and supervisor
+processes present, and the extruder running (fresh state) wherever the trajectory deposits,
+delivering the commanded flow (``interlock``, ``flow_check``).
 Losing the extruder's liveliness token stops the stream at once. Whenever a motion stops early,
 the screw is stopped in the same moment: on the controller directly (``ScrewStop``, its own
 pre-opened Modbus link, parameter ``screw_stop``) and through the extruder node. Every
