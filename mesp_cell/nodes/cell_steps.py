@@ -14,6 +14,7 @@ import time
 from typing import Any
 
 from mesp_cell.bus.session import Bus
+from mesp_cell.drivers.sim_clock import SimClock
 from mesp_cell.jobs import JobStore
 from mesp_cell.messages import (
     Command,
@@ -45,6 +46,7 @@ class CellSteps:
     prime_s: float
     dt: float
     time_scale: float
+    sim_clock: SimClock | None
     settle_s: float
     alive: set[str]
     events: queue.Queue[StreamEvent]

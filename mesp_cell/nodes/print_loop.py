@@ -26,7 +26,7 @@ from mesp_cell.jobs import JobRecord
 from mesp_cell.messages import Command
 from mesp_cell.nodes import print_ledger
 from mesp_cell.nodes.cell_steps import Stopped
-from mesp_cell.nodes.ink_at_rest import add_rest_ink, deposition_s, rest_ink
+from mesp_cell.nodes.ink_at_rest import RestTimer, add_rest_ink, deposition_s, rest_ink
 from mesp_cell.nodes.print_check import check_print
 from mesp_cell.nodes.stream_follow import StreamFollow
 from mesp_cell.profiles import stale_reason
@@ -104,20 +104,20 @@ class PrintLoop(StreamFollow):
             # extruder node); an e-stop is only cleared by the operator (`mesp estop --reset`).
             self._extruder("clear")
             on = plan.extrude_at(min(start + lead_n, plan.samples - 1))
-            t_on = -1.0
+            at_rest: RestTimer | None = None
             if on:
                 self._extruder("start", rate=self.setpoint)
                 # Lead and prime run on the extruder's (the twin's) clock; the switch-on must
                 # also show in the extruder state (wall-clock latency) before the stream starts.
                 wait = (self.lead_s + (0.0 if resume else self.prime_s)) / self.time_scale
-                t_on = time.monotonic()
+                at_rest = RestTimer(self.sim_clock, self.time_scale)
                 time.sleep(max(wait, min(self.lead_s, self.settle_s)))
 
             def started() -> None:
-                # the screw ran at rest from its start until the robot took the stream (the
-                # request's wall time counts time_scale times over on a fast twin's clock)
-                if t_on >= 0:
-                    self._add_rest_ink(job, (time.monotonic() - t_on) * self.time_scale
+                # the screw ran at rest from its start until the robot took the stream,
+                # counted on the flow's clock (the twin's simulated time)
+                if at_rest is not None:
+                    self._add_rest_ink(job, at_rest.seconds()
                                        - deposition_s(plan, start - 1, self.lead_s))
 
             ev = self._stream(job, plan, ext0, start, after, started=started)
