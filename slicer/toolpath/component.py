@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from core.path_accel import bundled_path_accel, bundled_turn_accel
+from core.path_accel import PathAccel
 from core.stages import LayerMesh, Pattern
 from core.tolerance import tol
 from slicer.config import ToolpathConfig
@@ -80,10 +80,12 @@ class Built:
 
 
 class Component:
-    """One layer component on its own vertex numbering, with its process fields."""
+    """One layer component on its own vertex numbering, with its process fields;
+    ``accel``: the job's cell's path accelerations (None: the bundled cell's)."""
 
     def __init__(self, layer: LayerMesh, face_ids: NDArray[np.int64], pattern: int,
-                 cfg: ToolpathConfig, profile: ExtrusionProfile) -> None:
+                 cfg: ToolpathConfig, profile: ExtrusionProfile,
+                 accel: PathAccel | None = None) -> None:
         used, faces = compact(layer.vertices, layer.faces[face_ids])
         vertices = layer.vertices[used]
         height = np.maximum(layer.height[used], 0.0)
@@ -112,7 +114,8 @@ class Component:
         self.cfg = cfg
         self.profile = profile
         # mm/s^2 and rad/s^2: the speed changes the cell's arm follows (``core.path_accel``)
-        self.path_accel, self.turn_accel = bundled_path_accel(), bundled_turn_accel()
+        accel = accel or PathAccel.bundled()
+        self.path_accel, self.turn_accel = accel.accel_mm_s2, accel.turn_rad_s2
         self.width = profile.width(self.height)
         # the profile table's speeds: a width scaled by the speed stays within them
         self.v_lo, self.v_hi = (float(x) for x in profile.speed_for_height(
