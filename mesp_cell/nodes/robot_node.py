@@ -5,7 +5,7 @@ trajectory; ``move`` (args ``to``: "home" | "sample", ``sample``) moves there on
 path (``robot_moves``);
 ``stream`` (args ``start``, ``end``, ``after_waypoint``, ``lead_s``, ``rate``: the job's
 extruder set-point, from its profile) streams the
-samples ``start`` .. ``end`` - 1 (default: to the end) and
+samples ``start`` .. ``end`` - 1 (default: to the end; ``robot_streams``) and
 switches the extruder ``lead_s`` ahead of every change of deposition, on the servo clock (lead
 compensation of the extruder's flow response); while depositing it also scales the rate with
 the arm's planned speed, ``lead_s`` ahead (``set_rate`` to the set-point x
@@ -44,7 +44,7 @@ from mesp_cell.command_checks import load_refusal, stream_refusal
 from mesp_cell.drivers.extruder_plant import PlantParams
 from mesp_cell.drivers.robot_base import RobotLinkError, ServoConfig
 from mesp_cell.drivers.screw_stop import ScrewStop
-from mesp_cell.drivers.stream import ServoStream, StreamPlan, StreamResult
+from mesp_cell.drivers.stream import ServoStream, StreamPlan
 from mesp_cell.messages import (
     Command,
     EStop,
@@ -52,25 +52,22 @@ from mesp_cell.messages import (
     Reply,
     RobotState,
     StreamEvent,
-    WaypointReached,
 )
 from mesp_cell.nodes.extruder_switch import Switcher, wall_clock
 from mesp_cell.nodes.flow_check import FlowCheck, FlowResponse
-from mesp_cell.nodes.flow_sync import FLOW_INTERVAL_S, FlowSync
 from mesp_cell.nodes.idle_pace import IDLE_HZ, Pace
-from mesp_cell.nodes.interlock import Interlock, MustRun
+from mesp_cell.nodes.interlock import Interlock
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from mesp_cell.nodes.print_ledger import Ledger
 from mesp_cell.nodes.robot_driver import cell_of, home_and_tool, make_driver
 from mesp_cell.nodes.robot_moves import RobotMoves
-from mesp_cell.states import RobotMode, StreamEnd
-
-END = "\x00end"  # guard reason that ends a stream at its ``end`` sample (not a stop)
+from mesp_cell.nodes.robot_streams import RobotStreams
+from mesp_cell.states import RobotMode
 
 log = logging.getLogger("mesp.robot")
 
 
-class RobotNode(RobotMoves, LifecycleNode):
+class RobotNode(RobotStreams, RobotMoves, LifecycleNode):
     """See the module docstring. Parameters: backend, host, servo (table), home_deg, tool_T,
     sim_clock (twin backends: the clock file shared with the extruder emulator), state_hz
     (100), extruder (node name), supervisor (node name), extruder_fresh_s (0.05: max age of the
@@ -213,23 +210,6 @@ class RobotNode(RobotMoves, LifecycleNode):
             self.screw.trigger(reason)
         self.switcher.put("stop", 0.0)
 
-    # -- interlocks ------------------------------------------------------------------------
-    def _guard_factory(self, plan: StreamPlan, start: int, lead_s: float) -> Any:
-        must = MustRun(plan.extrude, self._lead_samples(lead_s, plan),
-                       self._latency_samples(self.margin_s, plan), start)
-        return self.interlock.guard(must)
-
-    def _lead_samples(self, lead_s: float, plan: StreamPlan) -> int:
-        """Servo samples spanning the lead ``lead_s``: it compensates the extruder's flow
-        response, which runs on the twin's clock (the emulated extruder is scaled with it; the
-        real cell has time_scale 1), so it is simulated time: samples times dt."""
-        return round(lead_s / plan.dt)
-
-    def _latency_samples(self, seconds: float, plan: StreamPlan) -> int:
-        """Servo samples spanning ``seconds`` of wall time: the switch command's latency (bus,
-        Modbus, the next state) is wall-clock, and a fast twin runs more samples per second."""
-        return round(seconds * self.servo.time_scale / plan.dt)
-
     # -- commands --------------------------------------------------------------------------
     def argument_refusal(self, cmd: Command) -> str:
         if cmd.verb == "load":
@@ -278,109 +258,6 @@ class RobotNode(RobotMoves, LifecycleNode):
         # A flag, not the thread's liveness: the motion is over once its end event is out,
         # even if its thread has not returned yet.
         return self._in_motion.is_set()
-
-    def _start_stream(self, cmd: Command) -> Reply:
-        plan = self.plan
-        if plan is None or cmd.job_id != self.job_id:
-            return Reply.refuse(f"trajectory of job '{cmd.job_id}' is not loaded")
-        start = int(cmd.arg("start", 0))
-        K = plan.samples
-        end = min(int(cmd.arg("end", K)), K)
-        if not start < end:
-            return Reply.refuse(f"empty stream: start {start}, end {end}")
-        after = int(cmd.arg("after_waypoint", -1))
-        lead_s = float(cmd.arg("lead_s", 0.0))
-        if cmd.arg("rate") is None:  # the job's set-point: the supervisor reads it from the job
-            return Reply.refuse("stream needs the job's extruder set-point (rate)")
-        rate = float(cmd.arg("rate"))
-        full_guard = self._guard_factory(plan, start, lead_s)
-
-        def guard(k: int) -> str:
-            return END if k >= end else full_guard(k)
-
-        lead_n = self._lead_samples(lead_s, plan)
-
-        def cmd_on(k: int) -> bool:
-            # switch only for samples this stream sends (the part after ``end`` comes later)
-            return plan.extrude_at(min(k + lead_n, end - 1))
-
-        on0 = cmd_on(start)
-        switched = {"on": on0, "rate": rate if on0 else 0.0}  # as the extruder was left
-        flow = FlowSync(plan, rate, lead_n, end, self._latency_samples(FLOW_INTERVAL_S, plan),
-                        start) if self.sync_flow else None
-        job_dir = self.job_dir
-
-        def switch(verb: str, new: float, sent: float) -> None:
-            self.switcher.put(verb, sent, new - switched["rate"], job_dir)
-            switched["rate"] = new
-
-        def on_sample(k: int) -> None:
-            # Lead compensation on the servo clock: switch lead_n samples ahead.
-            on = cmd_on(k)
-            if on != switched["on"]:
-                switched["on"] = on
-                if on:
-                    r = flow.switch_on(k) if flow else rate
-                    switch("start", r, r)
-                else:
-                    switch("stop", 0.0, rate)
-            elif on and flow is not None:
-                change = flow(k)
-                if change is not None:
-                    switch("set_rate", change, change)
-
-        why = guard(start)
-        if why:
-            return Reply.refuse(why)
-        assert self.bus is not None and self.job_dir is not None
-        bus, job = self.bus, cmd.job_id
-        ledger = Ledger(self.job_dir, fresh=False)
-        ledger.stream(start, after)
-
-        def on_waypoint(i: int) -> None:
-            self.waypoint = int(plan.wp_id[i])
-            ledger.waypoint(self.waypoint, int(plan.wp_sample[i]))
-            bus.publish("waypoint", WaypointReached(job, self.waypoint, int(plan.wp_layer[i]),
-                                                    int(plan.wp_sample[i]), time.time()),
-                        express=True)
-
-        stream = ServoStream(self.driver, plan, start, guard, on_sample=on_sample,
-                             on_waypoint=on_waypoint, after_waypoint=after)
-        self.stream = stream
-        self.stop_reason = ""
-
-        def run() -> None:
-            self.mode = RobotMode.STREAMING
-            self.pace.wake()
-            try:
-                result = stream.run()
-            except Exception as exc:  # the end event must go out whatever happened
-                log.exception("stream failed")
-                self.driver.servo_stop()
-                result = StreamResult(False, f"stream failed: {exc}", stream.sample, time.time(),
-                                      np.zeros(0))
-            if result.reason and result.reason != END:
-                self._stop_screw(result.reason)  # the arm stopped: the screw stops with it
-                ledger.stopped(result.last_sample)
-            ledger.close()
-            if result.reason == END:  # reached ``end``: a finished stream, not a stop
-                result = StreamResult(True, "", result.last_sample, result.stop_t,
-                                      result.periods)
-            self.stop_reason, self.stop_t = result.reason, result.stop_t
-            self.mode = RobotMode.IDLE if result.done else RobotMode.STOPPED
-            if result.reason:
-                log.warning("stream of %s stopped at sample %d: %s", job, result.last_sample,
-                            result.reason)
-            log.info("stream of %s: oldest extruder state while depositing %.0f ms", job,
-                     self.interlock.max_age * 1000)
-            self._in_motion.clear()
-            self.pace.wake()
-            kind = StreamEnd.DONE if result.done else StreamEnd.STOPPED
-            self._event(StreamEvent(job, kind, result.reason, result.last_sample, result.stop_t))
-
-        self._in_motion.set()
-        self._motion = self.spawn(run, "stream")
-        return Reply.done()
 
     # -- outputs ---------------------------------------------------------------------------
     def _event(self, ev: StreamEvent) -> None:
