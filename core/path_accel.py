@@ -6,19 +6,44 @@ reaches a speed change only as fast as its joint accelerations allow, and where 
 direction turns along the path (a U-turn at the curved rim of a layer) the wrist turns with it,
 so there far less than on a path that keeps its direction (``path_accel``). The values are cell
 settings: they live in the cell file (``[planning] path_accel_mm_s2``,
-``path_turn_accel_rad_s2``); the slicer shapes its speed ramps to the bundled cell's
-(``bundled_path_accel``, ``bundled_turn_accel``), and the planner reports the toolpath
-segments that ask more than the job's cell gives on a path that keeps its direction
-(``plan.path_accel`` in report.json, ``planner.flow.asked_acceleration``).
+``path_turn_accel_rad_s2``); the slicer receives the job's cell's as a ``PathAccel`` (``mesp
+slice --cell``, the job's cell in the runtime; the bundled cell's by default) and shapes its
+speed ramps to them, and the planner reports the toolpath segments that ask more than the
+job's cell gives on a path that keeps its direction (``plan.path_accel`` in report.json,
+``planner.flow.asked_acceleration``).
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from core.tolerance import tol
 from core.toml_defaults import table
+
+
+@dataclass(frozen=True)
+class PathAccel:
+    """A cell's limits on speed changes along a path.
+
+    Attributes:
+        accel_mm_s2: mm/s^2, on a path that keeps its printing direction.
+        turn_rad_s2: rad/s^2, the tool's turn acceleration where the direction turns.
+    """
+
+    accel_mm_s2: float
+    turn_rad_s2: float
+
+    def __post_init__(self) -> None:
+        if not (self.accel_mm_s2 > 0 and self.turn_rad_s2 > 0):
+            raise ValueError("path_accel_mm_s2 and path_turn_accel_rad_s2 must be positive")
+
+    @staticmethod
+    def bundled() -> PathAccel:
+        """The bundled cell's (``planner/cells/default.toml``)."""
+        return PathAccel(bundled_path_accel(), bundled_turn_accel())
 
 
 def bundled_path_accel() -> float:

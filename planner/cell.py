@@ -19,6 +19,7 @@ import numpy as np
 from core.alpha_range import AlphaRange
 from core.configtools import build, merge, read_ranges, read_toml
 from core.errors import InputError
+from core.path_accel import PathAccel
 from core.toml_defaults import table
 
 # every field default below comes from the bundled cell, the one defaults file of a cell
@@ -230,6 +231,11 @@ class PlanningConfig:
     def alpha_range(self) -> AlphaRange:
         """The printing-angle range, as the slicer's step limits take it."""
         return AlphaRange(self.alpha_min_deg, self.alpha_max_deg)
+
+    @property
+    def path_accel(self) -> PathAccel:
+        """The path accelerations, as the slicer's speed ramps take them."""
+        return PathAccel(self.path_accel_mm_s2, self.path_turn_accel_rad_s2)
 
     def __post_init__(self) -> None:
         AlphaRange(self.alpha_min_deg, self.alpha_max_deg)  # validates the range

@@ -19,6 +19,7 @@ from core.alpha_range import AlphaRange
 from core.artifacts import atomic_write_bytes
 from core.configtools import to_dict
 from core.errors import InputError
+from core.path_accel import PathAccel
 from core.progress import Progress, StageTimer
 from core.report import update_report
 from core.stages import TetMesh
@@ -42,12 +43,14 @@ def slice_model(
     until: Until = "toolpath",
     alpha: AlphaRange | None = None,
     repair: bool = False,
+    accel: PathAccel | None = None,
 ) -> dict[str, Any]:
     """Slice ``model`` into ``out_dir``; returns the report written to ``report.json``.
 
     ``alpha`` is the printing-angle range of the cell the job is for (None: the bundled cell's);
-    the toolpath's step limits follow from it. ``repair``: close an open surface or wrap a
-    non-manifold one first (``slicer.repair``).
+    the toolpath's step limits follow from it; ``accel`` its path accelerations (None: the
+    bundled cell's), which the stripe joins' speed ramps keep. ``repair``: close an open
+    surface or wrap a non-manifold one first (``slicer.repair``).
     """
     from slicer import mesh_io, tetrahedralize
 
@@ -112,7 +115,7 @@ def slice_model(
     with timer.stage("toolpath"):
         try:
             report["toolpath"] = _toolpath(tetmesh, extraction, job, out_dir, surface,
-                                           progress, alpha or AlphaRange.bundled())
+                                           progress, alpha or AlphaRange.bundled(), accel)
         except ThinWallsError as exc:
             # refused before any toolpath file: the report marks the too-thin layers
             report["toolpath"] = exc.section
@@ -222,6 +225,7 @@ def _slice(
 def _toolpath(
     tetmesh: TetMesh, extraction: LayerExtraction, job: JobConfig, out_dir: Path,
     surface: Surface, progress: Progress | None, alpha: AlphaRange,
+    accel: PathAccel | None = None,
 ) -> dict[str, Any]:
     """Toolpath generation, its files, pictures and report section. A part whose walls are
     too thin for the narrowest line is refused here (``ThinWallsError``, with the section
@@ -236,7 +240,7 @@ def _toolpath(
     profile = load_profile(job.extrusion.profile)
     layers = extraction.layers
     result = compute_toolpath(layers, job, profile, progress=progress,
-                              measure_baselines=job.toolpath.measure_baselines)
+                              measure_baselines=job.toolpath.measure_baselines, accel=accel)
     report = dict(result.report)
     model_volume = surface.volume_mm3
     _too_thin(result, report, job, surface, extraction.slab_mm3)

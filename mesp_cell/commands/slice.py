@@ -73,7 +73,8 @@ def register(sub: Any) -> None:
     )
     p.add_argument("--cell", type=Path, metavar="CELL.toml", default=None,
                    help="cell file the job is for: its printing-angle range sets the "
-                   "toolpath's step limits (default: the bundled cell)")
+                   "toolpath's step limits, its path accelerations the speed ramps "
+                   "(default: the bundled cell)")
     p.add_argument("--on", metavar="CELL", default=None,
                    help="the cell whose active extrusion profile the job's profile \"active\" "
                    "is (`mesp profile`; default: the only cell running, else 'sim')")
@@ -142,7 +143,7 @@ def run(args: argparse.Namespace) -> int:
     alpha = cell.planning.alpha_range
     try:
         report = slice_model(args.model, args.out, job, progress=progress, until=args.until,
-                             alpha=alpha, repair=args.repair)
+                             alpha=alpha, repair=args.repair, accel=cell.planning.path_accel)
     except ThinWallsError as exc:
         raise exc.with_cell(_too_big(cell, exc.bbox_mm)) from exc
     except InputError as exc:

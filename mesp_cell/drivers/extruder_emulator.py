@@ -6,6 +6,9 @@ Run as a process (``python -m mesp_cell.drivers.extruder_emulator --port 0``; it
 faults: a disconnect closes every connection and the listening socket for the set time, a
 stall latches the stall fault, a freeze holds every request unanswered (the connections stay
 open, the plant runs on), a slip makes the screw turn at half its set-point without a fault.
+The physics loop steps the plant every ``cycle_s`` while the screw runs; at rest it sleeps
+until a write or an injection's end (at most ``REST_CYCLE_S``): every request steps the plant
+first and the flow's integral is exact, so only the running screw's watchdog needs the cycle.
 """
 
 from __future__ import annotations
@@ -33,6 +36,10 @@ def free_port(host: str = "127.0.0.1") -> int:
         return int(s.getsockname()[1])
 
 
+#: s, the longest the physics loop sleeps while the screw is off.
+REST_CYCLE_S = 0.1
+
+
 class ModbusEmulator:
     """The emulator's asyncio server; ``run()`` serves until ``stop()``."""
 
@@ -47,6 +54,7 @@ class ModbusEmulator:
         self._inject_until = 0.0
         self._frozen_until = 0.0  # monotonic s until which requests go unanswered
         self._stop: asyncio.Event | None = None
+        self._written: asyncio.Event | None = None  # set by a write: the physics loop wakes
         self._server: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self.ready = threading.Event()
@@ -65,6 +73,8 @@ class ModbusEmulator:
         touched = set(range(address, address + len(values)))
         for i, v in enumerate(values):
             self.regs[address + i] = int(v) & 0xFFFF
+        if self._written is not None:
+            self._written.set()
         if touched & {R.RATE_SET, R.RATE_SET + 1}:
             self.plant.set_rate(R.regs_to_float(self.regs[R.RATE_SET : R.RATE_SET + 2]), now)
         if R.HOST_HEARTBEAT in touched:
@@ -121,14 +131,25 @@ class ModbusEmulator:
 
     async def _physics(self) -> None:
         assert self._stop is not None
+        written = self._written = asyncio.Event()
         while not self._stop.is_set():
+            written.clear()
             now = time.monotonic()
             self.plant.step(now)
             if self._inject_until and now >= self._inject_until:
                 self._inject_until = 0.0
                 self.plant.set_stall(False, now)
                 self.plant.set_slip(1.0, now)
-            await asyncio.sleep(self.cycle_s)
+            if self.plant.running:
+                await asyncio.sleep(self.cycle_s)
+                continue
+            rest = REST_CYCLE_S
+            if self._inject_until:
+                rest = min(rest, max(self.cycle_s, self._inject_until - now))
+            try:
+                await asyncio.wait_for(written.wait(), rest)
+            except TimeoutError:
+                pass
 
     async def serve(self) -> None:
         """Serve until ``stop()``."""

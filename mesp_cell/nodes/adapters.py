@@ -36,7 +36,8 @@ def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
     """Slice ``model`` with the job file (None = defaults) into ``out_dir``; the report.
 
     The job's profile "active" is ``cell``'s active calibration (``mesp_cell.profiles``); the
-    step limits follow the alpha range of the cell file the job is planned in (None = bundled).
+    step limits follow the alpha range of the cell file the job is planned in (None = bundled),
+    the speed ramps its path accelerations.
     """
     from mesp_cell import profiles
     from planner.cell import load_cell
@@ -48,8 +49,9 @@ def slice_job(model: Path, job_file: Path | None, out_dir: Path, cell: str,
         raise InputError(f"model {model} does not exist", "check the path")
     job = load_job(Path(job_file) if job_file else None)
     job = job.with_overrides(extrusion={"profile": profiles.resolve(job.extrusion.profile, cell)})
-    alpha = load_cell(Path(cell_file) if cell_file else None).planning.alpha_range
-    report = pipeline.slice_model(model, Path(out_dir), job, alpha=alpha)
+    planning = load_cell(Path(cell_file) if cell_file else None).planning
+    report = pipeline.slice_model(model, Path(out_dir), job, alpha=planning.alpha_range,
+                                  accel=planning.path_accel)
     _check_volume(report)
     return report
 

@@ -3,7 +3,9 @@
 Commands (``extruder/cmd``): ``start`` (args ``rate`` mm^3/s), ``set_rate``, ``stop``,
 ``reset`` (all latched faults), ``clear`` (latched faults except an e-stop), ``estop``.
 A poll loop at ``state_hz`` reads the controller and publishes ``ExtruderState``, and feeds
-the controller watchdog at ``heartbeat_hz``. Interlocks: the motor stops when the robot or the
+the controller watchdog at ``heartbeat_hz``; while the screw is off, without a fault, and the
+robot at rest, it polls at the idle rate (``idle_pace``) and a command, an e-stop or a robot
+state that moves wakes it. Interlocks: the motor stops when the robot or the
 supervisor process disappears or an e-stop arrives; a link failure (after the driver's retries)
 is published as ``FAULT_LINK`` and the motor is commanded off as soon as the link returns.
 """
@@ -28,7 +30,9 @@ from mesp_cell.messages import (
     RobotState,
     fault_text,
 )
+from mesp_cell.nodes.idle_pace import Pace, stale_limit
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
+from mesp_cell.states import RobotMode
 
 log = logging.getLogger("mesp.extruder")
 
@@ -68,7 +72,7 @@ class ExtruderNode(LifecycleNode):
                                  "(driver modbus with host and port, or serial with url)") from exc
         self.robot_name = p.get("robot", "robot")
         self.supervisor_name = p.get("supervisor", "supervisor")
-        self.period = 1.0 / float(p.get("state_hz", 100.0))
+        self.pace = Pace(float(p.get("state_hz", 100.0)))
         # polls per controller watchdog heartbeat (20 Hz: well inside the 500 ms watchdog)
         self.hb_every = max(1, round(float(p.get("state_hz", 100.0))
                                      / float(p.get("heartbeat_hz", 20.0))))
@@ -79,8 +83,12 @@ class ExtruderNode(LifecycleNode):
         self.deadline_s = float(p.get("deadline_s", 0.08))
         self.robot_fresh_s = float(p.get("robot_fresh_s", 0.2))
         self._robot_t = time.monotonic()  # when the last robot state arrived
+        self._robot_moving = False  # the last robot state was a move or a stream
         self._running = False  # the motor ran in the last state read
+        self._run_t = 0.0  # monotonic s a state read first showed the motor running
+        self._fault = False  # the last state read showed a fault (or no link)
         self._exchange_t = 0.0  # monotonic s the current poll exchange began (0 = none)
+        self._exchange_begun = threading.Event()  # wakes ``_watch`` at rest
         self._late_sent = False  # the current exchange was already published as late
         self._exchange_failed0 = 0  # the driver's failed attempts before the current exchange
         self._seq = 0
@@ -118,6 +126,7 @@ class ExtruderNode(LifecycleNode):
         except ExtruderLinkError as exc:
             self.want_stop = True  # commanded off as soon as the link returns
             self.detail = str(exc)
+        self.pace.wake()  # the next state shows the stop at once
 
     def _on_presence(self, node: str, alive: bool) -> None:
         if not alive and node in (self.robot_name, self.supervisor_name):
@@ -125,13 +134,30 @@ class ExtruderNode(LifecycleNode):
 
     def _on_robot(self, msg: RobotState) -> None:
         self._robot_t = time.monotonic()
+        moving = msg.mode in (RobotMode.MOVING, RobotMode.STREAMING)
+        if moving and not self._robot_moving:
+            self.pace.wake()  # full rate before the arm relies on the extruder's state
+        self._robot_moving = moving
+
+    def _robot_stale(self, now: float) -> float:
+        """s the robot's state is overdue while the screw runs (<= 0: it is fresh). A robot at
+        rest publishes at the idle rate until it hears that the screw runs, so its last
+        state before the start may be an idle period older (``idle_pace.stale_limit``)."""
+        idle_paced = not self._robot_moving and self._robot_t < self._run_t
+        return now - self._robot_t - stale_limit(self.robot_fresh_s, idle_paced)
 
     def _watch(self) -> None:
-        """Every 10 ms: publish a link fault for an exchange past its deadline (the poll
+        """Every 10 ms while the motor runs or an exchange is under way (at rest it waits for
+        the next exchange): publish a link fault for an exchange past its deadline (the poll
         thread is stuck in it: a frozen controller) or with a failed attempt (a dropped or
         refused connection, at once, while the driver retries), and stop a running motor
         whose robot went silent."""
-        while not self.stopping.wait(0.01):
+        while not self.stopping.is_set():
+            if self._running or self._exchange_t:
+                self.stopping.wait(0.01)
+            else:
+                self._exchange_begun.wait(self.pace.idle_period)
+                self._exchange_begun.clear()
             now = time.monotonic()
             t0 = self._exchange_t
             failed = getattr(self.driver, "attempts_failed", 0) > self._exchange_failed0
@@ -144,7 +170,7 @@ class ExtruderNode(LifecycleNode):
                 log.error("%s", detail)
                 self.bus.publish("state", ExtruderState(time.time(), self._seq, 0.0, 0.0, 0.0,
                                                         False, False, FAULT_LINK, detail))
-            if self._running and now - self._robot_t > self.robot_fresh_s:
+            if self._running and self._robot_stale(now) > 0:
                 self._running = False
                 self._safe_stop(f"no state from {self.robot_name} for "
                                 f"{(now - self._robot_t) * 1000:.0f} ms")
@@ -157,6 +183,12 @@ class ExtruderNode(LifecycleNode):
         return rate_refusal(cmd)
 
     def _on_command(self, cmd: Command) -> Reply:
+        try:
+            return self._execute(cmd)
+        finally:
+            self.pace.wake()  # the next state shows the command's effect at once
+
+    def _execute(self, cmd: Command) -> Reply:
         verb = cmd.verb
         try:
             with self.lock:
@@ -196,12 +228,14 @@ class ExtruderNode(LifecycleNode):
         """Read and publish the state every period; feed the controller watchdog at
         ``heartbeat_hz``. One Modbus exchange per state (a heartbeat write only every few):
         each exchange needs the controller process scheduled, and on a loaded host those
-        wake-ups are what delays the state. A state later than 5 periods is logged with
-        where the time went (lock, exchange and retries, publishing, scheduling)."""
+        wake-ups are what delays the state. At rest (the screw off, no fault, the robot not
+        moving) it polls at the idle rate (``idle_pace``). A state later than 5 periods is
+        logged with where the time went (lock, exchange and retries, publishing, scheduling)."""
         next_t = time.monotonic()
         last_pub = next_t
-        slow = 5 * self.period
+        slow = 5 * self.pace.period
         while not self.stopping.is_set() and self.bus is not None:
+            self.pace.begin()
             self._seq += 1
             t0 = time.monotonic()
             failed0 = getattr(self.driver, "attempts_failed", 0)
@@ -210,6 +244,7 @@ class ExtruderNode(LifecycleNode):
                 self._late_sent = False
                 self._exchange_failed0 = failed0
                 self._exchange_t = t0
+                self._exchange_begun.set()
                 with self.lock:
                     t_lock = time.monotonic()
                     if self.want_stop:
@@ -220,7 +255,10 @@ class ExtruderNode(LifecycleNode):
                     r = self.driver.read()
                     t_ex = time.monotonic()
                 self._exchange_t = 0.0
+                if r.running and not self._running:
+                    self._run_t = time.monotonic()  # before ``_running``: ``_watch`` reads both
                 self._running = r.running
+                self._fault = bool(r.fault)
                 self.connected = True
                 msg = ExtruderState(time.time(), self._seq, r.rate_set, r.rate, r.volume,
                                     r.running, True, r.fault,
@@ -230,6 +268,7 @@ class ExtruderNode(LifecycleNode):
                 if self.connected:
                     log.error("%s", exc)
                 self.connected, self.detail, self.want_stop = False, str(exc), True
+                self._fault = True
                 msg = ExtruderState(time.time(), self._seq, 0.0, 0.0, 0.0, False, False,
                                     FAULT_LINK, self.detail)
             self.bus.publish("state", msg)
@@ -242,10 +281,9 @@ class ExtruderNode(LifecycleNode):
                             getattr(self.driver, "attempts_failed", 0) - failed0,
                             1000 * (t1 - t_ex))
             last_pub = t1
-            next_t += self.period
-            if next_t < t1:  # late: publish the next state a period from now, no burst
-                next_t = t1 + self.period
-            time.sleep(max(0.0, next_t - time.monotonic()))
+            busy = self._running or self._fault or self._robot_moving or self.want_stop
+            slow = 5 * self.pace.period_for(busy)
+            next_t = self.pace.wait(next_t, busy, t1)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -14,125 +14,31 @@ The supervisor node (``supervisor_node``) owns the state this mixin works on.
 from __future__ import annotations
 
 import logging
-import queue
-import threading
 import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
-
-import numpy as np
 
 from core.errors import InputError
 from core.report import update_report
 from core.status import JobState
 from core.tolerance import tol
-from mesp_cell.bus.session import Bus
 from mesp_cell.drivers.stream import StreamPlan, sha256_of
-from mesp_cell.jobs import JobRecord, JobStore
-from mesp_cell.messages import (
-    Command,
-    ExtruderState,
-    JobProgress,
-    Reply,
-    RobotState,
-    StreamEvent,
-    WaypointReached,
-)
+from mesp_cell.jobs import JobRecord
+from mesp_cell.messages import Command
 from mesp_cell.nodes import print_ledger
-from mesp_cell.nodes.eta_estimate import EtaEstimate
-from mesp_cell.nodes.ink_at_rest import add_rest_ink, deposition_s, rest_ink
+from mesp_cell.nodes.cell_steps import Stopped
+from mesp_cell.nodes.ink_at_rest import RestTimer, add_rest_ink, deposition_s, rest_ink
 from mesp_cell.nodes.print_check import check_print
+from mesp_cell.nodes.stream_follow import StreamFollow
 from mesp_cell.profiles import stale_reason
-from mesp_cell.states import RobotMode, StreamEnd
+from mesp_cell.states import StreamEnd
 from slicer.extrusion import ExtrusionProfile, load_job_profile
 
 log = logging.getLogger("mesp.supervisor")
 
 
-class Stopped(Exception):
-    """The print stopped early; ``args[0]`` is the reason."""
-
-
-class PrintLoop:
-    """The print of one job, mixed into ``SupervisorNode`` (which sets these attributes in
-    ``on_configure``)."""
-
-    bus: Bus | None
-    store: JobStore
-    cell: str
-    names: dict[str, str]
-    timeouts: dict[str, float]
-    setpoint: float
-    true_per_nominal: float
-    lead_s: float
-    prime_s: float
-    dt: float
-    time_scale: float
-    settle_s: float
-    alive: set[str]
-    events: queue.Queue[StreamEvent]
-    waypoints: queue.Queue[WaypointReached]
-    robot_state: RobotState | None
-    extruder_state: ExtruderState | None
-    current: str
-    request: str
-    _lock: threading.Lock
-
-    def _retract(self, job_id: str) -> str:
-        """Move home on the robot's checked safe path (retract along the nozzle axis, transfer
-        above the gel); returns what happened, for the job's history."""
-        asked = time.time()
-        reply = self._request(self.names["robot"], Command.make("move", job_id, to="home"))
-        if not reply.ok:
-            return f"nozzle not retracted: {reply.reason}"
-        try:
-            ev = self._wait_event(job_id, self.timeouts["move"], asked)
-        except Stopped as exc:
-            return f"nozzle not retracted: {exc}"
-        if ev.kind != StreamEnd.MOVED:
-            return f"nozzle not retracted: {ev.reason or 'move interrupted'}"
-        return "nozzle retracted along its axis out of the gel and parked at home"
-
-    def _request(self, node: str, cmd: Command, timeout: float = 5.0) -> Reply:
-        assert self.bus is not None
-        return self.bus.request(node, cmd, timeout)
-
-    def _wait_event(self, job_id: str, timeout: float, since: float = 0.0) -> StreamEvent:
-        """The next end event of ``job_id``'s motion that ended at or after ``since`` (s since
-        the epoch: the request's time; an earlier one is a stale stream end, e.g. the stop
-        of a paused stream, which each repeated stop request may announce again)."""
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            if self.names["robot"] not in self.alive:
-                raise Stopped(f"{self.names['robot']} process lost")
-            try:
-                ev = self.events.get(timeout=0.05)
-            except queue.Empty:
-                continue
-            if ev.job_id == job_id and ev.t >= since:
-                return ev
-        raise Stopped(f"robot did not finish within {timeout:g} s")
-
-    def _check_request(self) -> None:
-        """Raise ``Stopped`` if the operator paused or aborted the current job."""
-        if self.request:
-            raise Stopped(f"{self.request} requested")
-
-    def _move(self, job_id: str, **args: Any) -> None:
-        self._check_request()
-        asked = time.time()
-        reply = self._request(self.names["robot"], Command.make("move", job_id, **args))
-        if not reply.ok:
-            raise Stopped(reply.reason)
-        ev = self._wait_event(job_id, self.timeouts["move"], asked)
-        if ev.kind != StreamEnd.MOVED:
-            raise Stopped(ev.reason or "move interrupted")
-
-    def _extruder(self, verb: str, **args: Any) -> None:
-        reply = self._request(self.names["extruder"], Command.make(verb, **args), 2.0)
-        if not reply.ok:
-            raise Stopped(f"extruder refused {verb}: {reply.reason}")
+class PrintLoop(StreamFollow):
+    """The print of one job, mixed into ``SupervisorNode`` (the steps on the nodes:
+    ``cell_steps``; following a stream: ``stream_follow``)."""
 
     def _job_profile(self, job: JobRecord) -> ExtrusionProfile:
         """The profile ``job`` was sliced with, if it is the cell's active calibration."""
@@ -198,20 +104,20 @@ class PrintLoop:
             # extruder node); an e-stop is only cleared by the operator (`mesp estop --reset`).
             self._extruder("clear")
             on = plan.extrude_at(min(start + lead_n, plan.samples - 1))
-            t_on = -1.0
+            at_rest: RestTimer | None = None
             if on:
                 self._extruder("start", rate=self.setpoint)
                 # Lead and prime run on the extruder's (the twin's) clock; the switch-on must
                 # also show in the extruder state (wall-clock latency) before the stream starts.
                 wait = (self.lead_s + (0.0 if resume else self.prime_s)) / self.time_scale
-                t_on = time.monotonic()
+                at_rest = RestTimer(self.sim_clock, self.time_scale)
                 time.sleep(max(wait, min(self.lead_s, self.settle_s)))
 
             def started() -> None:
-                # the screw ran at rest from its start until the robot took the stream (the
-                # request's wall time counts time_scale times over on a fast twin's clock)
-                if t_on >= 0:
-                    self._add_rest_ink(job, (time.monotonic() - t_on) * self.time_scale
+                # the screw ran at rest from its start until the robot took the stream,
+                # counted on the flow's clock (the twin's simulated time)
+                if at_rest is not None:
+                    self._add_rest_ink(job, at_rest.seconds()
                                        - deposition_s(plan, start - 1, self.lead_s))
 
             ev = self._stream(job, plan, ext0, start, after, started=started)
@@ -241,32 +147,6 @@ class PrintLoop:
             with self._lock:
                 self.current, self.request = "", ""
 
-    def _stream(self, job: JobRecord, plan: StreamPlan, ext0: float, start: int, after: int,
-                end: int | None = None,
-                started: Callable[[], None] | None = None) -> StreamEvent:
-        """Stream samples ``start`` .. ``end`` - 1 (to the end by default) and follow it;
-        ``started`` is called as soon as the robot took the stream."""
-        self._check_request()
-        args: dict[str, Any] = {"start": start, "after_waypoint": after, "lead_s": self.lead_s,
-                                "rate": self.setpoint}
-        if end is not None:
-            args["end"] = end
-        since = time.time()
-        reply = self._request(self.names["robot"], Command.make("stream", job.id, **args))
-        if not reply.ok:
-            raise Stopped(reply.reason)
-        if started is not None:
-            started()
-        return self._monitor(job, plan, ext0, since)
-
-    def _checkpoint(self, job: JobRecord, plan: StreamPlan) -> tuple[int, int]:
-        """(waypoint, sample) the robot's ledger last printed (-1, -1: nothing yet), recorded
-        as the job's checkpoint."""
-        waypoint, sample = print_ledger.read(Path(job.dir)).last
-        if waypoint >= 0:
-            i = int(np.searchsorted(plan.wp_id, waypoint))
-            self.store.checkpoint(job.id, int(plan.wp_layer[i]), waypoint, sample)
-        return waypoint, sample
 
     def _stopped(self, job: JobRecord, plan: StreamPlan, reason: str, ext0: float) -> None:
         try:
@@ -306,91 +186,6 @@ class PrintLoop:
         log.warning("the screw did not show at rest within %g s; the job's volume may miss "
                     "its last ink", timeout)
 
-    def _volume(self, job: JobRecord, ext0: float) -> float:
-        """mm^3 extruded: the controller's totaliser (nominal) times the profile's C per
-        set-point (what weighing found it really delivers)."""
-        now = self.extruder_state.volume if self.extruder_state else ext0
-        return job.volume + max(0.0, now - ext0) * self.true_per_nominal
-
-    def _drain(self, job_id: str) -> None:
-        """Record the waypoints still queued (they may trail the stream's end event)."""
-        time.sleep(0.05)
-        last: WaypointReached | None = None
-        while not self.waypoints.empty():
-            wp = self.waypoints.get_nowait()
-            if wp.job_id == job_id:
-                last = wp
-        if last is not None:
-            self.store.checkpoint(job_id, last.layer, last.waypoint, last.sample)
-
-    def _lost_end(self, job_id: str, asked: float) -> StreamEvent | None:
-        """The end of ``job_id``'s stream if its event was lost on the bus: the robot's state
-        shows it not streaming well after the stream was asked for (``asked``, s since the
-        epoch); its ``status`` then says how it ended."""
-        rs = self.robot_state
-        if (rs is None or rs.t < asked + 1.0 or rs.job_id != job_id
-                or rs.mode not in (RobotMode.IDLE, RobotMode.STOPPED)):
-            return None
-        reply = self._request(self.names["robot"], Command.make("status"), 1.0)
-        if not reply.ok or reply.value("mode") not in (RobotMode.IDLE, RobotMode.STOPPED):
-            return None
-        log.warning("the end of the stream of %s did not arrive; the robot is %s", job_id,
-                    reply.value("mode"))
-        why = str(reply.value("stop_reason", ""))
-        kind = StreamEnd.DONE if reply.value("mode") == RobotMode.IDLE else StreamEnd.STOPPED
-        return StreamEvent(job_id, kind, why, rs.sample, float(reply.value("stop_t", time.time())))
-
-    def _monitor(self, job: JobRecord, plan: StreamPlan, ext0: float,
-                 since: float = 0.0) -> StreamEvent:
-        """Follow the stream (checkpoints, progress) until it ends (an end event stamped at
-        or after ``since``, the stream request's time: not a stale one). The robot node
-        switches the extruder on the servo clock."""
-        assert self.bus is not None
-        K = plan.samples
-        last_report = 0.0
-        eta_of = EtaEstimate(self.time_scale / self.dt)
-        layer = max(job.layer, 0)
-        wp_last = job.waypoint
-        asked = time.time()
-        while True:
-            if self.names["robot"] not in self.alive:
-                raise Stopped(f"{self.names['robot']} process lost")
-            lost = self._lost_end(job.id, asked)
-            if lost is not None:
-                return lost
-            if self.names["extruder"] not in self.alive:
-                self._request(self.names["robot"], Command.make("stop", reason="extruder lost"),
-                              1.0)
-            if self.request:
-                self._request(self.names["robot"], Command.make("stop", reason=self.request),
-                              1.0)
-            try:
-                ev = self.events.get(timeout=0.01)
-                if (ev.job_id == job.id and ev.kind in (StreamEnd.DONE, StreamEnd.STOPPED)
-                        and ev.t >= since):
-                    return ev
-            except queue.Empty:
-                pass
-            last: WaypointReached | None = None
-            while not self.waypoints.empty():
-                wp = self.waypoints.get_nowait()
-                if wp.job_id == job.id:
-                    last = wp
-            if last is not None:
-                self.store.checkpoint(job.id, last.layer, last.waypoint, last.sample)
-                layer, wp_last = max(last.layer, 0), last.waypoint
-            rs = self.robot_state
-            s = rs.sample if rs is not None and rs.job_id == job.id else -1
-            now = time.monotonic()
-            if now - last_report > 0.2 and s >= 0:
-                last_report = now
-                percent = 100.0 * (s + 1) / K
-                eta = eta_of(now, s, K - 1 - s)
-                vol = self._volume(job, ext0)
-                self.store.progress(job.id, percent, eta, vol)
-                self.bus.publish("progress", JobProgress(
-                    job.id, "printing", layer, plan.layers, wp_last, int(plan.wp_id.size),
-                    percent, eta, vol, time.time()))
 
     def _add_rest_ink(self, job: JobRecord, seconds: float) -> None:
         """Add ``seconds`` of the extruder's clock at the set-point to the job's ink at rest."""

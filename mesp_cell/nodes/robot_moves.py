@@ -22,6 +22,7 @@ import numpy as np
 from mesp_cell.drivers.robot_base import RobotDriver, ServoConfig
 from mesp_cell.drivers.stream import ServoStream, StreamPlan
 from mesp_cell.messages import Command, Reply, StreamEvent
+from mesp_cell.nodes.idle_pace import Pace
 from mesp_cell.nodes.interlock import Interlock
 from mesp_cell.states import RobotMode, StreamEnd
 
@@ -40,6 +41,7 @@ class RobotMoves:
     mode: str
     _abort_move: threading.Event
     _in_motion: threading.Event
+    pace: Pace
     _motion: threading.Thread | None
 
     interlock: Interlock
@@ -106,6 +108,7 @@ class RobotMoves:
 
         def run() -> None:
             self.mode = RobotMode.MOVING
+            self.pace.wake()  # the state shows the move at once (``idle_pace``)
             log.info("move of %s to %s (%d servo samples)", cmd.job_id, to,
                      0 if path is None else path.samples)
             ok, why = False, "move interrupted"
@@ -121,6 +124,7 @@ class RobotMoves:
             finally:
                 self.mode = RobotMode.IDLE if ok else RobotMode.STOPPED
                 self._in_motion.clear()
+                self.pace.wake()
             log.info("move of %s to %s %s", cmd.job_id, to, "done" if ok else why)
             self._event(StreamEvent(cmd.job_id, StreamEnd.MOVED if ok else StreamEnd.STOPPED,
                                     "" if ok else why, -1, time.time()))

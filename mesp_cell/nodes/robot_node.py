@@ -5,7 +5,7 @@ trajectory; ``move`` (args ``to``: "home" | "sample", ``sample``) moves there on
 path (``robot_moves``);
 ``stream`` (args ``start``, ``end``, ``after_waypoint``, ``lead_s``, ``rate``: the job's
 extruder set-point, from its profile) streams the
-samples ``start`` .. ``end`` - 1 (default: to the end) and
+samples ``start`` .. ``end`` - 1 (default: to the end; ``robot_streams``) and
 switches the extruder ``lead_s`` ahead of every change of deposition, on the servo clock (lead
 compensation of the extruder's flow response); while depositing it also scales the rate with
 the arm's planned speed, ``lead_s`` ahead (``set_rate`` to the set-point x
@@ -15,9 +15,11 @@ slowed the arm (``sync_flow``, default on);
 ``stop``; ``reset`` clears a latched e-stop; ``status`` answers the latched e-stop (reason,
 time), the motion mode and the last stream's stop.
 Motions run in one motion thread; their end is published as a ``StreamEvent`` on
-``robot/event``. Interlocks, checked before every servo sample: no e-stop,
-the extruder and supervisor processes present, and the extruder running (fresh state) wherever
-the trajectory deposits, delivering the commanded flow (``interlock``, ``flow_check``).
+``robot/event``. The state is published at ``state_hz`` while the arm moves or the screw runs,
+at the idle rate otherwise (``idle_pace``; at least twice the controller's watchdog rate).
+Interlocks, checked before every servo sample: no e-stop, the extruder and supervisor
+processes present, and the extruder running (fresh state) wherever the trajectory deposits,
+delivering the commanded flow (``interlock``, ``flow_check``).
 Losing the extruder's liveliness token stops the stream at once. Whenever a motion stops early,
 the screw is stopped in the same moment: on the controller directly (``ScrewStop``, its own
 pre-opened Modbus link, parameter ``screw_stop``) and through the extruder node. Every
@@ -42,7 +44,7 @@ from mesp_cell.command_checks import load_refusal, stream_refusal
 from mesp_cell.drivers.extruder_plant import PlantParams
 from mesp_cell.drivers.robot_base import RobotLinkError, ServoConfig
 from mesp_cell.drivers.screw_stop import ScrewStop
-from mesp_cell.drivers.stream import ServoStream, StreamPlan, StreamResult
+from mesp_cell.drivers.stream import ServoStream, StreamPlan
 from mesp_cell.messages import (
     Command,
     EStop,
@@ -50,24 +52,22 @@ from mesp_cell.messages import (
     Reply,
     RobotState,
     StreamEvent,
-    WaypointReached,
 )
 from mesp_cell.nodes.extruder_switch import Switcher, wall_clock
 from mesp_cell.nodes.flow_check import FlowCheck, FlowResponse
-from mesp_cell.nodes.flow_sync import FLOW_INTERVAL_S, FlowSync
-from mesp_cell.nodes.interlock import Interlock, MustRun
+from mesp_cell.nodes.idle_pace import IDLE_HZ, Pace
+from mesp_cell.nodes.interlock import Interlock
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from mesp_cell.nodes.print_ledger import Ledger
 from mesp_cell.nodes.robot_driver import cell_of, home_and_tool, make_driver
 from mesp_cell.nodes.robot_moves import RobotMoves
-from mesp_cell.states import RobotMode, StreamEnd
-
-END = "\x00end"  # guard reason that ends a stream at its ``end`` sample (not a stop)
+from mesp_cell.nodes.robot_streams import RobotStreams
+from mesp_cell.states import RobotMode
 
 log = logging.getLogger("mesp.robot")
 
 
-class RobotNode(RobotMoves, LifecycleNode):
+class RobotNode(RobotStreams, RobotMoves, LifecycleNode):
     """See the module docstring. Parameters: backend, host, servo (table), home_deg, tool_T,
     sim_clock (twin backends: the clock file shared with the extruder emulator), state_hz
     (100), extruder (node name), supervisor (node name), extruder_fresh_s (0.05: max age of the
@@ -116,7 +116,10 @@ class RobotNode(RobotMoves, LifecycleNode):
         self.switcher = Switcher(self._send_switch, clock.now if clock else wall_clock,
                                  self.servo.time_scale, clock,
                                  getattr(self.driver, "sim_now", None))
-        self.state_period = 1.0 / float(p.get("state_hz", 100.0))
+        # the state loop kicks the controller's watchdog: at rest too, twice as often as it
+        # needs
+        self.pace = Pace(float(p.get("state_hz", 100.0)),
+                         max(IDLE_HZ, 2.0 * self.servo.watchdog_hz))
         self.plan: StreamPlan | None = None
         self.job_id = ""
         self.job_dir: Path | None = None
@@ -137,8 +140,7 @@ class RobotNode(RobotMoves, LifecycleNode):
 
     def on_activate(self) -> None:
         assert self.bus is not None
-        self.bus.subscribe(self.extruder_name, "state", ExtruderState,
-                           self.interlock.on_extruder)
+        self.bus.subscribe(self.extruder_name, "state", ExtruderState, self._on_extruder)
         self.bus.subscribe("estop", "estop", EStop, self._on_estop)
         self.bus.watch_presence(self._on_presence)
         self.bus.serve(self._on_command)
@@ -174,6 +176,17 @@ class RobotNode(RobotMoves, LifecycleNode):
             # appeared: ask the bus again, so the successor is not taken for gone.
             self.spawn(lambda: self._recheck(node), f"recheck-{node}")
 
+    def _on_extruder(self, msg: ExtruderState) -> None:
+        was = self.interlock.ext
+        self.interlock.on_extruder(msg)
+        if msg.running and not (was is not None and was.running):
+            self.pace.wake()  # the screw runs: the extruder node judges this node's state
+
+    def _busy_pace(self) -> bool:
+        """The state goes out at the full rate: the arm moves or the screw runs."""
+        ext = self.interlock.ext
+        return self._in_motion.is_set() or (ext is not None and ext.running)
+
     def _recheck(self, node: str) -> None:
         time.sleep(0.3)
         if self.bus is not None and node in self.bus.alive_nodes(1.0):
@@ -196,23 +209,6 @@ class RobotNode(RobotMoves, LifecycleNode):
         if self.screw is not None:
             self.screw.trigger(reason)
         self.switcher.put("stop", 0.0)
-
-    # -- interlocks ------------------------------------------------------------------------
-    def _guard_factory(self, plan: StreamPlan, start: int, lead_s: float) -> Any:
-        must = MustRun(plan.extrude, self._lead_samples(lead_s, plan),
-                       self._latency_samples(self.margin_s, plan), start)
-        return self.interlock.guard(must)
-
-    def _lead_samples(self, lead_s: float, plan: StreamPlan) -> int:
-        """Servo samples spanning the lead ``lead_s``: it compensates the extruder's flow
-        response, which runs on the twin's clock (the emulated extruder is scaled with it; the
-        real cell has time_scale 1), so it is simulated time: samples times dt."""
-        return round(lead_s / plan.dt)
-
-    def _latency_samples(self, seconds: float, plan: StreamPlan) -> int:
-        """Servo samples spanning ``seconds`` of wall time: the switch command's latency (bus,
-        Modbus, the next state) is wall-clock, and a fast twin runs more samples per second."""
-        return round(seconds * self.servo.time_scale / plan.dt)
 
     # -- commands --------------------------------------------------------------------------
     def argument_refusal(self, cmd: Command) -> str:
@@ -263,107 +259,6 @@ class RobotNode(RobotMoves, LifecycleNode):
         # even if its thread has not returned yet.
         return self._in_motion.is_set()
 
-    def _start_stream(self, cmd: Command) -> Reply:
-        plan = self.plan
-        if plan is None or cmd.job_id != self.job_id:
-            return Reply.refuse(f"trajectory of job '{cmd.job_id}' is not loaded")
-        start = int(cmd.arg("start", 0))
-        K = plan.samples
-        end = min(int(cmd.arg("end", K)), K)
-        if not start < end:
-            return Reply.refuse(f"empty stream: start {start}, end {end}")
-        after = int(cmd.arg("after_waypoint", -1))
-        lead_s = float(cmd.arg("lead_s", 0.0))
-        if cmd.arg("rate") is None:  # the job's set-point: the supervisor reads it from the job
-            return Reply.refuse("stream needs the job's extruder set-point (rate)")
-        rate = float(cmd.arg("rate"))
-        full_guard = self._guard_factory(plan, start, lead_s)
-
-        def guard(k: int) -> str:
-            return END if k >= end else full_guard(k)
-
-        lead_n = self._lead_samples(lead_s, plan)
-
-        def cmd_on(k: int) -> bool:
-            # switch only for samples this stream sends (the part after ``end`` comes later)
-            return plan.extrude_at(min(k + lead_n, end - 1))
-
-        on0 = cmd_on(start)
-        switched = {"on": on0, "rate": rate if on0 else 0.0}  # as the extruder was left
-        flow = FlowSync(plan, rate, lead_n, end, self._latency_samples(FLOW_INTERVAL_S, plan),
-                        start) if self.sync_flow else None
-        job_dir = self.job_dir
-
-        def switch(verb: str, new: float, sent: float) -> None:
-            self.switcher.put(verb, sent, new - switched["rate"], job_dir)
-            switched["rate"] = new
-
-        def on_sample(k: int) -> None:
-            # Lead compensation on the servo clock: switch lead_n samples ahead.
-            on = cmd_on(k)
-            if on != switched["on"]:
-                switched["on"] = on
-                if on:
-                    r = flow.switch_on(k) if flow else rate
-                    switch("start", r, r)
-                else:
-                    switch("stop", 0.0, rate)
-            elif on and flow is not None:
-                change = flow(k)
-                if change is not None:
-                    switch("set_rate", change, change)
-
-        why = guard(start)
-        if why:
-            return Reply.refuse(why)
-        assert self.bus is not None and self.job_dir is not None
-        bus, job = self.bus, cmd.job_id
-        ledger = Ledger(self.job_dir, fresh=False)
-        ledger.stream(start, after)
-
-        def on_waypoint(i: int) -> None:
-            self.waypoint = int(plan.wp_id[i])
-            ledger.waypoint(self.waypoint, int(plan.wp_sample[i]))
-            bus.publish("waypoint", WaypointReached(job, self.waypoint, int(plan.wp_layer[i]),
-                                                    int(plan.wp_sample[i]), time.time()),
-                        express=True)
-
-        stream = ServoStream(self.driver, plan, start, guard, on_sample=on_sample,
-                             on_waypoint=on_waypoint, after_waypoint=after)
-        self.stream = stream
-        self.stop_reason = ""
-
-        def run() -> None:
-            self.mode = RobotMode.STREAMING
-            try:
-                result = stream.run()
-            except Exception as exc:  # the end event must go out whatever happened
-                log.exception("stream failed")
-                self.driver.servo_stop()
-                result = StreamResult(False, f"stream failed: {exc}", stream.sample, time.time(),
-                                      np.zeros(0))
-            if result.reason and result.reason != END:
-                self._stop_screw(result.reason)  # the arm stopped: the screw stops with it
-                ledger.stopped(result.last_sample)
-            ledger.close()
-            if result.reason == END:  # reached ``end``: a finished stream, not a stop
-                result = StreamResult(True, "", result.last_sample, result.stop_t,
-                                      result.periods)
-            self.stop_reason, self.stop_t = result.reason, result.stop_t
-            self.mode = RobotMode.IDLE if result.done else RobotMode.STOPPED
-            if result.reason:
-                log.warning("stream of %s stopped at sample %d: %s", job, result.last_sample,
-                            result.reason)
-            log.info("stream of %s: oldest extruder state while depositing %.0f ms", job,
-                     self.interlock.max_age * 1000)
-            self._in_motion.clear()
-            kind = StreamEnd.DONE if result.done else StreamEnd.STOPPED
-            self._event(StreamEvent(job, kind, result.reason, result.last_sample, result.stop_t))
-
-        self._in_motion.set()
-        self._motion = self.spawn(run, "stream")
-        return Reply.done()
-
     # -- outputs ---------------------------------------------------------------------------
     def _event(self, ev: StreamEvent) -> None:
         if self.bus is not None:
@@ -372,6 +267,8 @@ class RobotNode(RobotMoves, LifecycleNode):
     def _publish_state(self) -> None:
         next_t = time.monotonic()
         while not self.stopping.is_set() and self.bus is not None:
+            self.pace.begin()
+            busy = self._busy_pace()
             d = self.driver
             q, qd = np.degrees(d.joints()), np.degrees(d.joint_speeds())
             stream, plan = self.stream, self.plan
@@ -387,8 +284,7 @@ class RobotNode(RobotMoves, LifecycleNode):
                 d.kick_watchdog()
             elif not self._busy():
                 d.reconnect()
-            next_t += self.state_period
-            time.sleep(max(0.0, next_t - time.monotonic()))
+            next_t = self.pace.wait(next_t, busy, time.monotonic())
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -34,6 +34,7 @@ from pathlib import Path
 
 from core.errors import InputError
 from core.status import JobState
+from mesp_cell.drivers.sim_clock import SimClock
 from mesp_cell.jobs import JobRecord, JobStore
 from mesp_cell.messages import (
     FAULT_ESTOP,
@@ -59,8 +60,9 @@ READY_REASON = ("waits for the operator: remove the last part, check the gel lev
 class SupervisorNode(PrintLoop, LifecycleNode):
     """See the module docstring (the print of one job: ``PrintLoop``). Parameters: jobs_db,
     lead_s, prime_s, dt, time_scale (of the twin and the emulated extruder: ETA, lead and
-    prime waits), settle_s, robot/extruder/slicer/planner (node names), slice_timeout_s,
-    plan_timeout_s, move_timeout_s, poll_s."""
+    prime waits), sim_clock (the twin's shared clock file: the ink at rest in simulated
+    time; none on the real cell), settle_s, robot/extruder/slicer/planner (node names),
+    slice_timeout_s, plan_timeout_s, move_timeout_s, poll_s."""
 
     def on_configure(self) -> None:
         p = self.params
@@ -73,6 +75,9 @@ class SupervisorNode(PrintLoop, LifecycleNode):
         self.dt = float(p.get("dt", 0.002))
         # The twin's speed-up; the emulated extruder runs on the same clock (ETA, lead, prime).
         self.time_scale = float(p.get("time_scale", 1.0))
+        # the twin's shared clock, which the emulated extruder's flow runs on (read only)
+        path = p.get("sim_clock") or None
+        self.sim_clock = SimClock(self.time_scale, path) if path else None
         self.settle_s = float(p.get("settle_s", 0.05))  # wall s for a switch-on to show
         self.names = {k: p.get(k, k) for k in ("robot", "extruder", "slicer", "planner")}
         # 0 = sized to each job (mesp_cell.step_timeouts)
@@ -111,6 +116,8 @@ class SupervisorNode(PrintLoop, LifecycleNode):
 
     def on_shutdown(self) -> None:
         self.store.close()
+        if self.sim_clock is not None:
+            self.sim_clock.close()
 
     # -- inputs ----------------------------------------------------------------------------
     def _on_robot(self, msg: RobotState) -> None:

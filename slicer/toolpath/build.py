@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from core.path_accel import PathAccel
 from core.progress import Progress
 from core.stages import LayerMesh, Layers, Toolpath
 from slicer.config import JobConfig, ToolpathConfig
@@ -46,10 +47,10 @@ from slicer.toolpath.thin_features import thin_features
 SERIAL_BELOW = 4  # fewer layers than this are processed in the calling process
 
 
-def _run_chunk(args: tuple[list[LayerMesh], str, ToolpathConfig, ExtrusionProfile, bool]
-               ) -> list[LayerResult]:
-    meshes, first, cfg, profile, baselines = args
-    return [layer_toolpath(m, layer_pattern(m.index, first), cfg, profile, baselines)
+def _run_chunk(args: tuple[list[LayerMesh], str, ToolpathConfig, ExtrusionProfile, bool,
+                           PathAccel | None]) -> list[LayerResult]:
+    meshes, first, cfg, profile, baselines, accel = args
+    return [layer_toolpath(m, layer_pattern(m.index, first), cfg, profile, baselines, accel)
             for m in meshes if len(m.faces)]
 
 
@@ -60,6 +61,7 @@ def compute_toolpath(
     progress: Progress | None = None,
     measure_baselines: bool = True,
     workers: int = 2,
+    accel: PathAccel | None = None,
 ) -> ToolpathResult:
     """Toolpath of all layers (module docstring) with its report section.
 
@@ -71,6 +73,7 @@ def compute_toolpath(
         measure_baselines: also compute the width error without deformation and of the
             Poisson alternative on stripe layers (a third of the work on the socket).
         workers: processes; 1 (or few layers) runs in the calling process.
+        accel: the path accelerations of the cell the job is for (None: the bundled cell's).
     """
     t_start = time.perf_counter()
     cfg = config.toolpath
@@ -83,7 +86,8 @@ def compute_toolpath(
     if workers <= 1 or len(meshes) < SERIAL_BELOW or multiprocessing.current_process().daemon:
         # (a daemonic process, e.g. a pipeline node, may not start worker processes)
         for i, m in enumerate(meshes):
-            results.extend(_run_chunk(([m], cfg.first_pattern, cfg, profile, measure_baselines)))
+            results.extend(_run_chunk(([m], cfg.first_pattern, cfg, profile, measure_baselines,
+                                       accel)))
             report_progress((i + 1) / len(meshes), f"layer {m.index}")
     else:
         n_chunks = min(len(meshes), 4 * workers)
@@ -95,7 +99,7 @@ def compute_toolpath(
         ctx = multiprocessing.get_context(method)
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
             futures = [pool.submit(_run_chunk, (c, cfg.first_pattern, cfg, profile,
-                                                measure_baselines)) for c in chunks]
+                                                measure_baselines, accel)) for c in chunks]
             for fut in as_completed(futures):
                 part = fut.result()
                 results.extend(part)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from core.path_accel import bundled_path_accel, bundled_turn_accel
+from core.path_accel import PathAccel
 from core.stages import LayerMesh, Pattern
 from core.tolerance import tol
 from slicer.config import ToolpathConfig
@@ -34,10 +34,14 @@ from slicer.toolpath.resample import (
     resample_lines,
 )
 from slicer.toolpath.results import Waypoints
-from slicer.toolpath.stripe_joins import RIM_INSET, narrow_joins
+from slicer.toolpath.stripe_joins import RIM_INSET, narrow_joins_indexed
 from slicer.toolpath.surface_geometry import CENTRE_WIDTH_SCALE
 
 TINY_LOOP = 2.0  # closed lines shorter than this x W are dropped (a blob, not a loop)
+
+#: (H, v, W, normal) at a path's points: (N,) float64 mm, mm/s, mm and (N, 3) float64
+SurfaceValues = tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64],
+                      NDArray[np.float64]]
 
 
 def compact(vertices: NDArray[np.float64], faces: NDArray[np.int32]) -> tuple[
@@ -80,10 +84,12 @@ class Built:
 
 
 class Component:
-    """One layer component on its own vertex numbering, with its process fields."""
+    """One layer component on its own vertex numbering, with its process fields;
+    ``accel``: the job's cell's path accelerations (None: the bundled cell's)."""
 
     def __init__(self, layer: LayerMesh, face_ids: NDArray[np.int64], pattern: int,
-                 cfg: ToolpathConfig, profile: ExtrusionProfile) -> None:
+                 cfg: ToolpathConfig, profile: ExtrusionProfile,
+                 accel: PathAccel | None = None) -> None:
         used, faces = compact(layer.vertices, layer.faces[face_ids])
         vertices = layer.vertices[used]
         height = np.maximum(layer.height[used], 0.0)
@@ -112,7 +118,8 @@ class Component:
         self.cfg = cfg
         self.profile = profile
         # mm/s^2 and rad/s^2: the speed changes the cell's arm follows (``core.path_accel``)
-        self.path_accel, self.turn_accel = bundled_path_accel(), bundled_turn_accel()
+        accel = accel or PathAccel.bundled()
+        self.path_accel, self.turn_accel = accel.accel_mm_s2, accel.turn_rad_s2
         self.width = profile.width(self.height)
         # the profile table's speeds: a width scaled by the speed stays within them
         self.v_lo, self.v_hi = (float(x) for x in profile.speed_for_height(
@@ -198,7 +205,8 @@ class Component:
         if not link:
             empty = link_pieces(lines, [], self.vertices, self.faces, self.graph,
                                 np.zeros(0), lifter, lift)
-            return Built(lines, empty, self._waypoints(empty, scale), scale=scale)
+            return Built(lines, empty, self._waypoints(empty, self._surface_values(empty, scale)),
+                         scale=scale)
         _, _, w_rs = self.values_at(lines.face, lines.bary, scale)
         level = None
         if level_of is not None:
@@ -215,36 +223,52 @@ class Component:
                              lifter, lift, factor, joiner,
                              spiral=self.cfg.spiral_rings and level is not None)
         pace = None
+        values = self._surface_values(linked, scale)
         if level is None and trim_distance is not None and narrow_on:
             # stripe joins lie half or more over the stripes they join: printed narrow, as
             # fast as the arm follows (the line speed at their ends and the path acceleration)
-            v_link = np.zeros(len(linked.points))
-            n_link = np.zeros((len(linked.points), 3))
             on = linked.face >= 0
-            v_link[on] = self.values_at(linked.face[on], linked.bary[on], scale)[1]
-            n_link[on] = point_normals(self.vertex_normals, self.faces, self.normals,
-                                       linked.face[on], linked.bary[on])
-            linked, pace = narrow_joins(linked, self.vertices, self.faces, v_link, n_link,
-                                        self.path_accel, self.turn_accel)
-        return Built(lines, linked, self._waypoints(linked, scale, pace), scale=scale)
+            linked, pace, old_at = narrow_joins_indexed(
+                linked, self.vertices, self.faces, values[1],
+                np.where(on[:, None], values[3], 0.0), self.path_accel, self.turn_accel)
+            values = self._surface_values(linked, scale, (values, old_at))
+        return Built(lines, linked, self._waypoints(linked, values, pace), scale=scale)
 
-    def _waypoints(self, linked: LinkedPath, scale: NDArray[np.float64] | None = None,
-                   pace: NDArray[np.float64] | None = None) -> Waypoints:
-        """Process values at the linked points; ``pace`` (N,) float64: the speed over the
-        line speed each point prints at, its width divided by it (``stripe_joins``: joins
-        print narrower, down to JOIN_SCALE x the width)."""
+    def _surface_values(self, linked: LinkedPath, scale: NDArray[np.float64] | None,
+                        known: tuple[SurfaceValues, NDArray[np.int64]] | None = None
+                        ) -> SurfaceValues:
+        """(H, v, W, normal) at the linked points on the surface (``values_at``,
+        ``point_normals``; zero H, v, W and the linked normal elsewhere): (N,) float64 x 3,
+        (N, 3) float64. ``known``: the values of an earlier path and the index in this one
+        of each of its points (``narrow_joins_indexed``): only the other points are
+        computed."""
         n = len(linked.points)
         h, v, w = np.zeros(n), np.zeros(n), np.zeros(n)
         normal = linked.normal.copy()
+        todo = linked.face >= 0
+        if known is not None:
+            old, at = known
+            h[at], v[at], w[at] = old[0], old[1], old[2]
+            normal[at] = old[3]
+            todo[at] = False
+        h[todo], v[todo], w[todo] = self.values_at(linked.face[todo], linked.bary[todo], scale)
+        normal[todo] = point_normals(self.vertex_normals, self.faces, self.normals,
+                                     linked.face[todo], linked.bary[todo])
+        return h, v, w, normal
+
+    def _waypoints(self, linked: LinkedPath, values: SurfaceValues,
+                   pace: NDArray[np.float64] | None = None) -> Waypoints:
+        """Process values at the linked points from their ``_surface_values``; ``pace``
+        (N,) float64: the speed over the line speed each point prints at, its width divided
+        by it (``stripe_joins``: joins print narrower, down to JOIN_SCALE x the width)."""
+        n = len(linked.points)
+        h, v, w, normal = (a.copy() for a in values)
         on = linked.face >= 0
-        h[on], v[on], w[on] = self.values_at(linked.face[on], linked.bary[on], scale)
         if pace is not None and np.any(pace > 1.0):
             thin = (pace > 1.0) & on
             fast = self.flowed_speed(v[thin], 1.0 / pace[thin], self.profile.speed_at(h[thin]))
             w[thin] *= v[thin] / fast
             v[thin] = fast
-        normal[on] = point_normals(self.vertex_normals, self.faces, self.normals,
-                                   linked.face[on], linked.bary[on])
         if np.any(~on) and np.any(on):
             # travel points copy the process values of the previous surface point
             src = np.maximum.accumulate(np.where(on, np.arange(n), -1))

@@ -7,6 +7,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from core.path_accel import PathAccel
 from core.stages import LayerMesh, Layers, Pattern
 from core.tolerance import tol
 from slicer.config import ToolpathConfig
@@ -25,11 +26,16 @@ def layer_pattern(index: int, first: str) -> int:
 
 
 def layer_toolpath(layer: LayerMesh, pattern: int, cfg: ToolpathConfig,
-                   profile: ExtrusionProfile, measure_baselines: bool = True) -> LayerResult:
+                   profile: ExtrusionProfile, measure_baselines: bool = True,
+                   accel: PathAccel | None = None) -> LayerResult:
     """All components of one layer in nearest-neighbour order, joined by travel moves.
     Layer 0 uses ``cfg.first_layer_beta`` instead of the profile's beta when it is set.
+<<<<<<< HEAD
     Holes far narrower than a line are closed first (``pinholes.py``)."""
     layer = close_pinholes(layer, profile)
+=======
+    ``accel``: the job's cell's path accelerations (None: the bundled cell's)."""
+>>>>>>> cell
     if layer.index == 0 and cfg.first_layer_beta > 0.0:
         profile = replace(profile, beta=cfg.first_layer_beta)
 
@@ -49,7 +55,7 @@ def layer_toolpath(layer: LayerMesh, pattern: int, cfg: ToolpathConfig,
             layer.vertices[np.unique(layer.faces[comps[i]])] - pos, axis=1))) for i in todo]
         ci = todo.pop(int(np.argmin(dist)))
         res = component_toolpath(layer, comps[ci], pattern, cfg, profile, pos, lifter, lift,
-                                 measure_baselines)
+                                 measure_baselines, accel)
         wp = res.waypoints
         if len(wp.position) == 0:
             results.append(res)

@@ -17,6 +17,7 @@ from dataclasses import replace
 import numpy as np
 from numpy.typing import NDArray
 
+from core.path_accel import PathAccel
 from core.stages import LayerMesh, Pattern
 from core.tolerance import tol
 from slicer.config import ToolpathConfig
@@ -35,12 +36,13 @@ DEFORM_SPREAD = 0.01  # relative W spread above which the layer is deformed (eqs
 def component_toolpath(
     layer: LayerMesh, face_ids: NDArray[np.int64], pattern: int, cfg: ToolpathConfig,
     profile: ExtrusionProfile, start: NDArray[np.float64], lifter: Lifter, lift: float,
-    measure_baselines: bool,
+    measure_baselines: bool, accel: PathAccel | None = None,
 ) -> ComponentResult:
-    """Toolpath of one component; a failure becomes an empty result carrying its reason."""
+    """Toolpath of one component; a failure becomes an empty result carrying its reason.
+    ``accel``: the job's cell's path accelerations (None: the bundled cell's)."""
     try:
         return _component_toolpath_unsafe(layer, face_ids, pattern, cfg, profile, start,
-                                          lifter, lift, measure_baselines)
+                                          lifter, lift, measure_baselines, accel)
     except (ValueError, RuntimeError, np.linalg.LinAlgError) as exc:
         faces = layer.faces[face_ids]
         required = required_volume(layer.vertices, faces, np.maximum(layer.height, 0.0))
@@ -57,12 +59,12 @@ def component_toolpath(
 def _component_toolpath_unsafe(
     layer: LayerMesh, face_ids: NDArray[np.int64], pattern: int, cfg: ToolpathConfig,
     profile: ExtrusionProfile, start: NDArray[np.float64], lifter: Lifter, lift: float,
-    measure_baselines: bool,
+    measure_baselines: bool, accel: PathAccel | None = None,
 ) -> ComponentResult:
     """Toolpath of one connected layer component (see the module docstring)."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
-    comp = Component(layer, face_ids, pattern, cfg, profile)
+    comp = Component(layer, face_ids, pattern, cfg, profile, accel)
     spread = float((comp.width.max() - comp.width.min()) / max(comp.w_mean, tol.zero))
     deform_status: str = DeformStatus.SKIPPED
     deformed = comp.vertices

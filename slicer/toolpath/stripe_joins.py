@@ -105,16 +105,28 @@ def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArr
     mm, ``faces`` (m, 3)): the point nearest to the join's line there, with its face and
     barycentrics. A line end keeps its width, so the line's last segment is not tapered.
     """
+    out, pace, _ = narrow_joins_indexed(linked, vertices, faces, speed, normal, accel,
+                                        turn_accel)
+    return out, pace
+
+
+def narrow_joins_indexed(linked: LinkedPath, vertices: NDArray[np.float64],
+                         faces: NDArray[np.int32], speed: NDArray[np.float64],
+                         normal: NDArray[np.float64], accel: float, turn_accel: float
+                         ) -> tuple[LinkedPath, NDArray[np.float64], NDArray[np.int64]]:
+    """``narrow_joins`` and the (N,) int64 index in the result of every point of ``linked``
+    (the others are the added points): values known at the old points need not be
+    computed again."""
     n = len(linked.points)
     pace = np.ones(n)
     if n < 2:
-        return linked, pace
+        return linked, pace, np.arange(n)
     conn = linked.connector_segments()
     edge = np.diff(np.concatenate([[0], conn.astype(np.int8), [0]]))
     first = np.flatnonzero(edge == 1)  # run of connector segments from point first ...
     last = np.flatnonzero(edge == -1)  # ... to point last
     if len(first) == 0:
-        return linked, pace
+        return linked, pace, np.arange(n)
     p = linked.points
     step = np.linalg.norm(np.diff(p, axis=0), axis=1)
     arc = np.concatenate([[0.0], np.cumsum(step)])
@@ -173,7 +185,7 @@ def narrow_joins(linked: LinkedPath, vertices: NDArray[np.float64], faces: NDArr
     rise = np.minimum(np.minimum(x / ramp.ramp_a[k], (length[k] - x) / ramp.ramp_b[k]), 1.0)
     pace_new = np.ones(len(points))
     pace_new[inside] = 1.0 + (ramp.pace[k] - 1.0) * np.clip(rise, 0.0, 1.0)
-    return out, pace_new
+    return out, pace_new, new_index
 
 
 def coverage_miss(vertices: NDArray[np.float64], faces: NDArray[np.int32],

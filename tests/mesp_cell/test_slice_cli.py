@@ -209,3 +209,36 @@ def test_no_baselines_flag_turns_the_baseline_measurements_off() -> None:
     off = parser.parse_args(["slice", "m.stl", "--out", "o", "--no-baselines"])
     assert slice_command.job_from_args(on).toolpath.measure_baselines
     assert not slice_command.job_from_args(off).toolpath.measure_baselines
+
+
+def test_slice_passes_the_chosen_cells_path_accelerations(tmp_path: Path,
+                                                          monkeypatch: pytest.MonkeyPatch) -> None:
+    """`mesp slice --cell CELL` shapes the stripe joins' speed ramps to that cell's arm
+    ([planning] path_accel_mm_s2, path_turn_accel_rad_s2), not the bundled cell's."""
+    import argparse
+
+    from core.path_accel import PathAccel
+    from mesp_cell.commands import slice as slice_command
+    from slicer import pipeline
+
+    cell = tmp_path / "slow_arm.toml"
+    cell.write_text("[planning]\npath_accel_mm_s2 = 35.0\npath_turn_accel_rad_s2 = 0.75\n")
+    seen: dict[str, object] = {}
+
+    class Sliced(Exception):
+        pass
+
+    def spy(*args: object, **kw: object) -> None:
+        seen.update(kw)
+        raise Sliced
+
+    monkeypatch.setattr(pipeline, "slice_model", spy)
+    parser = argparse.ArgumentParser()
+    slice_command.register(parser.add_subparsers())
+    for given, expected in ((["--cell", str(cell)], PathAccel(35.0, 0.75)),
+                            ([], PathAccel.bundled())):
+        args = parser.parse_args(["slice", str(EXAMPLES / "cube.stl"), "--out",
+                                  str(tmp_path / "out"), "--quiet", *given])
+        with pytest.raises(Sliced):
+            slice_command.run(args)
+        assert seen["accel"] == expected
