@@ -30,12 +30,9 @@ def layer_toolpath(layer: LayerMesh, pattern: int, cfg: ToolpathConfig,
                    accel: PathAccel | None = None) -> LayerResult:
     """All components of one layer in nearest-neighbour order, joined by travel moves.
     Layer 0 uses ``cfg.first_layer_beta`` instead of the profile's beta when it is set.
-<<<<<<< HEAD
-    Holes far narrower than a line are closed first (``pinholes.py``)."""
-    layer = close_pinholes(layer, profile)
-=======
+    Holes far narrower than a line are closed first (``pinholes.py``).
     ``accel``: the job's cell's path accelerations (None: the bundled cell's)."""
->>>>>>> cell
+    layer = close_pinholes(layer, profile)
     if layer.index == 0 and cfg.first_layer_beta > 0.0:
         profile = replace(profile, beta=cfg.first_layer_beta)
 
