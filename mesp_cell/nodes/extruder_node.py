@@ -13,6 +13,7 @@ is published as ``FAULT_LINK`` and the motor is commanded off as soon as the lin
 from __future__ import annotations
 
 import logging
+import math
 import threading
 import time
 from collections.abc import Sequence
@@ -30,7 +31,7 @@ from mesp_cell.messages import (
     RobotState,
     fault_text,
 )
-from mesp_cell.nodes.idle_pace import Pace, stale_limit
+from mesp_cell.nodes.idle_pace import Pace
 from mesp_cell.nodes.lifecycle import LifecycleNode, NodeStartError, node_main
 from mesp_cell.states import RobotMode
 
@@ -73,9 +74,10 @@ class ExtruderNode(LifecycleNode):
         self.robot_name = p.get("robot", "robot")
         self.supervisor_name = p.get("supervisor", "supervisor")
         self.pace = Pace(float(p.get("state_hz", 100.0)))
-        # polls per controller watchdog heartbeat (20 Hz: well inside the 500 ms watchdog)
-        self.hb_every = max(1, round(float(p.get("state_hz", 100.0))
-                                     / float(p.get("heartbeat_hz", 20.0))))
+        # s between controller watchdog heartbeats (20 Hz: well inside the 500 ms watchdog),
+        # by time, not by poll count: at rest the polls come at the idle rate
+        self.hb_period = 1.0 / float(p.get("heartbeat_hz", 20.0))
+        self._hb_t = -math.inf  # monotonic s of the last heartbeat sent
         self.lock = threading.Lock()
         self.connected = False
         self.detail = ""
@@ -135,16 +137,16 @@ class ExtruderNode(LifecycleNode):
     def _on_robot(self, msg: RobotState) -> None:
         self._robot_t = time.monotonic()
         moving = msg.mode in (RobotMode.MOVING, RobotMode.STREAMING)
-        if moving and not self._robot_moving:
+        was_moving, self._robot_moving = self._robot_moving, moving  # set before the wake
+        if moving and not was_moving:
             self.pace.wake()  # full rate before the arm relies on the extruder's state
-        self._robot_moving = moving
 
     def _robot_stale(self, now: float) -> float:
-        """s the robot's state is overdue while the screw runs (<= 0: it is fresh). A robot at
-        rest publishes at the idle rate until it hears that the screw runs, so its last
-        state before the start may be an idle period older (``idle_pace.stale_limit``)."""
-        idle_paced = not self._robot_moving and self._robot_t < self._run_t
-        return now - self._robot_t - stale_limit(self.robot_fresh_s, idle_paced)
+        """s the robot's state is overdue while the screw runs (<= 0: it is fresh): no robot
+        state for ``robot_fresh_s`` since the later of its last state and the screw's start (a
+        resting robot's loop runs at its idle rate until it hears of the start, then at once
+        at its full rate)."""
+        return now - max(self._robot_t, self._run_t) - self.robot_fresh_s
 
     def _watch(self) -> None:
         """Every 10 ms while the motor runs or an exchange is under way (at rest it waits for
@@ -250,8 +252,9 @@ class ExtruderNode(LifecycleNode):
                     if self.want_stop:
                         self.driver.stop()
                         self.want_stop = False
-                    if self._seq % self.hb_every == 0:
+                    if t_lock - self._hb_t >= self.hb_period:
                         self.driver.heartbeat()
+                        self._hb_t = t_lock
                     r = self.driver.read()
                     t_ex = time.monotonic()
                 self._exchange_t = 0.0

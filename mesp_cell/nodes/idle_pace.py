@@ -9,8 +9,8 @@ extruder) shows a fault; the peer's state that makes it busy wakes its loop at o
 (``Pace.wake``), so the full rate is back before any motion or extrusion relies on it.
 
 The only judge that can meet an idle-paced state is the extruder's robot staleness, in the
-moment between the screw's start and the robot's first state after it heard of it: it allows
-the idle period on top of its limit there (``stale_limit``). The idle rate is owned here.
+moment between the screw's start and the robot's first state after it heard of it: it counts
+from the start (``ExtruderNode._robot_stale``). The idle rate is owned here.
 """
 
 from __future__ import annotations
@@ -62,9 +62,3 @@ class Pace:
             return time.monotonic()
         return due
 
-
-def stale_limit(fresh_s: float, idle_paced: bool) -> float:
-    """s a peer's last state may be old: ``fresh_s``, plus the longest idle period
-    (``1 / IDLE_HZ``) when that state may have come from an idle-paced loop: its next one is
-    due that much later than at the full rate."""
-    return fresh_s + (1.0 / IDLE_HZ if idle_paced else 0.0)

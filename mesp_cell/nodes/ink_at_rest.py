@@ -59,5 +59,6 @@ class RestTimer:
         return time.monotonic() * self.time_scale
 
     def seconds(self) -> float:
-        """s of the flow's clock since the timer was made."""
-        return self._now() - self.t0
+        """s of the flow's clock since the timer was made (never negative: a shared clock
+        can appear to step back, ``sim_clock``)."""
+        return max(0.0, self._now() - self.t0)

@@ -116,10 +116,10 @@ class RobotNode(RobotStreams, RobotMoves, LifecycleNode):
         self.switcher = Switcher(self._send_switch, clock.now if clock else wall_clock,
                                  self.servo.time_scale, clock,
                                  getattr(self.driver, "sim_now", None))
-        # the state loop kicks the controller's watchdog: at rest too, twice as often as it
-        # needs
+        # the state loop kicks the controller's watchdog: at rest too, five times as often as
+        # it needs (a loop held up by most of a period still kicks in time)
         self.pace = Pace(float(p.get("state_hz", 100.0)),
-                         max(IDLE_HZ, 2.0 * self.servo.watchdog_hz))
+                         max(IDLE_HZ, 5.0 * self.servo.watchdog_hz))
         self.plan: StreamPlan | None = None
         self.job_id = ""
         self.job_dir: Path | None = None

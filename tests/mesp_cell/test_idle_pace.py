@@ -1,5 +1,6 @@
 """Idle pacing: the full rate while busy, the idle rate at rest, a wake ends an idle wait at
-once; the extruder node's robot staleness allows the idle period only where it applies."""
+once; the extruder node judges the robot's silence from the screw's start and keeps feeding the
+controller's watchdog at its heartbeat rate at rest."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ import pytest
 
 from mesp_cell.messages import RobotState
 from mesp_cell.nodes.extruder_node import ExtruderNode
-from mesp_cell.nodes.idle_pace import IDLE_HZ, Pace, stale_limit
+from mesp_cell.drivers.extruder_base import ExtruderReading
+from mesp_cell.nodes.idle_pace import IDLE_HZ, Pace
 from mesp_cell.states import RobotMode
 
 
@@ -53,11 +55,6 @@ def test_idle_rate_never_exceeds_the_full_rate() -> None:
         Pace(0.0)
 
 
-def test_stale_limit_adds_the_idle_period_only_for_an_idle_paced_state() -> None:
-    assert stale_limit(0.1, False) == pytest.approx(0.1)
-    assert stale_limit(0.1, True) == pytest.approx(0.1 + 1.0 / IDLE_HZ)
-
-
 def _extruder_node(robot_fresh_s: float) -> ExtruderNode:
     """The node's staleness state alone (no bus, no driver)."""
     node = ExtruderNode.__new__(ExtruderNode)
@@ -73,24 +70,73 @@ def _robot_state(mode: RobotMode) -> RobotState:
                       False, "", 0.0)
 
 
-def test_extruder_judges_a_resting_robot_by_its_idle_rate_until_it_heard_of_the_start() -> None:
+def test_extruder_judges_a_resting_robot_from_the_screws_start() -> None:
     node = _extruder_node(0.1)
     node._on_robot(_robot_state(RobotMode.IDLE))
     t_state = node._robot_t
     node._run_t = t_state + 0.05  # the screw started 50 ms after the robot's idle state
-    # its next state is due up to an idle period later: not stale at 0.15 s, stale after 0.2 s
-    assert node._robot_stale(t_state + 0.15) < 0
-    assert node._robot_stale(t_state + 0.1 + 1.0 / IDLE_HZ + 0.01) > 0
-    # a state that came after the start is judged by the full limit
+    # the robot has robot_fresh_s from the start to answer (its loop wakes when it hears of it)
+    assert node._robot_stale(t_state + 0.14) < 0
+    assert node._robot_stale(t_state + 0.16) > 0
+    # a state that came after the start is judged from that state
     node._on_robot(_robot_state(RobotMode.IDLE))
     node._run_t = node._robot_t - 0.01
+    assert node._robot_stale(node._robot_t + 0.09) < 0
     assert node._robot_stale(node._robot_t + 0.11) > 0
 
 
-def test_extruder_judges_a_moving_robot_by_the_full_limit_and_wakes_for_it() -> None:
+def test_extruder_wakes_for_a_moving_robot_after_it_knows_it_moves() -> None:
     node = _extruder_node(0.1)
     node.pace.begin()
+    seen: list[bool] = []
+    node.pace.wake = lambda: seen.append(node._robot_moving)  # type: ignore[method-assign]
     node._on_robot(_robot_state(RobotMode.STREAMING))
-    assert node.pace._wake.is_set()  # the poll loop goes to the full rate at once
-    node._run_t = node._robot_t + 0.05
-    assert node._robot_stale(node._robot_t + 0.11) > 0
+    assert seen == [True]  # a poll woken by it reads the arm as moving (no idle wait lost)
+    node._on_robot(_robot_state(RobotMode.STREAMING))
+    assert seen == [True]  # only the change wakes
+
+
+class _Driver:
+    """A controller at rest that records when the host fed its watchdog."""
+
+    def __init__(self) -> None:
+        self.beats: list[float] = []
+
+    def heartbeat(self) -> None:
+        self.beats.append(time.monotonic())
+
+    def read(self) -> ExtruderReading:
+        return ExtruderReading(0.0, 0.0, 0.0, False, 0, 0)
+
+    def stop(self) -> None:
+        pass
+
+
+class _Bus:
+    def publish(self, topic: str, msg: object) -> None:
+        pass
+
+
+def test_extruder_feeds_the_controller_watchdog_at_its_heartbeat_rate_at_rest() -> None:
+    """At rest the polls come at the idle rate; the heartbeat (20 Hz, within the controller's
+    500 ms watchdog) goes out with every poll that is due one, not every few polls."""
+    node = ExtruderNode.__new__(ExtruderNode)
+    node.pace = Pace(100.0)
+    node.driver = _Driver()  # type: ignore[assignment]
+    node.bus = _Bus()  # type: ignore[assignment]
+    node.stopping = threading.Event()
+    node.lock = threading.Lock()
+    node.hb_period, node._hb_t = 1.0 / 20.0, float("-inf")
+    node._seq, node.want_stop, node.connected, node.detail = 0, False, False, ""
+    node._robot_t, node._robot_moving, node._run_t = 0.0, False, 0.0
+    node._running = node._fault = node._late_sent = False
+    node._exchange_t, node._exchange_failed0 = 0.0, 0
+    node._exchange_begun = threading.Event()
+    poll = threading.Thread(target=node._poll, daemon=True)
+    poll.start()
+    time.sleep(1.0)
+    node.stopping.set()
+    poll.join(2.0)
+    beats = node.driver.beats  # type: ignore[attr-defined]
+    assert len(beats) >= 0.8 * IDLE_HZ  # one with every idle poll
+    assert max(b - a for a, b in zip(beats, beats[1:], strict=False)) < 0.3  # watchdog 0.5 s
