@@ -7,7 +7,7 @@ boundary everywhere: the rings of two holes then meet in a rib a rib's width apa
 lines where one fits), or the lines fitted to the local width leave the rib bare (the rim's
 rings carry its ink). ``ribbed`` gives such a component the same rule a whole band gets:
 contours on the wide part and one line along each narrow wall (``LineSource.ribs``), kept
-where its lines keep their spacing better as printed.
+where its lines cover the component better as printed.
 """
 
 from __future__ import annotations
@@ -16,6 +16,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING, Protocol
 
 from core.stages import Pattern
+from slicer.toolpath.stripe_joins import coverage_miss
 
 if TYPE_CHECKING:
     from slicer.config import ToolpathConfig
@@ -36,7 +37,6 @@ class _Candidates(Protocol):
 
     def run_joined(self, surface: LineSource, used: int) -> VolumeMatch[Built]: ...
     def as_printed(self, m: VolumeMatch[Built]) -> VolumeMatch[Built]: ...
-    def p90(self, m: VolumeMatch[Built], junctions: bool = False) -> float: ...
 
 
 def ribbed(cand: _Candidates, surf: LineSource, match: VolumeMatch[Built], used: int,
@@ -44,11 +44,12 @@ def ribbed(cand: _Candidates, surf: LineSource, match: VolumeMatch[Built], used:
            ) -> tuple[LineSource, VolumeMatch[Built]] | None:
     """The lines of a component printed with contours (``used``, band fitting on) with its
     walls narrower than 2 x ``half_width`` x its mean W printed along their middle, where
-    those walls make up at least ``share`` of its area and the lines beat ``match`` (the
-    lines chosen so far): p90 of the width error lower as printed (flow-fitted where the
-    volume is missed: the walls' lines cross at their junctions; measured as medial lines
-    meeting there), the volume within ``tolerance`` (relative) or ``match``'s error. None
-    where they do not."""
+    those walls make up at least ``share`` of its area and the lines cover the component
+    better than ``match`` (the lines chosen so far), both as printed (flow-fitted where the
+    volume is missed): the larger of the area left bare and covered twice lower
+    (``coverage``; a width error measured along the lines cannot see a wall left without a
+    line), the volume within ``tolerance`` (relative) or ``match``'s error. None where they
+    do not."""
     hw = half_width * cand.comp.w_mean
     if (used != Pattern.CONTOUR or not cand.cfg.fit_bands
             or surf.geometry.narrow_share(hw, share) < share):
@@ -58,6 +59,12 @@ def ribbed(cand: _Candidates, surf: LineSource, match: VolumeMatch[Built], used:
     printed = cand.as_printed(alt)
     volume = float(printed.result.waypoints.deposited().sum())
     if (abs(volume / cand.required - 1.0) <= max(tolerance, abs(match.rel_error))
-            and cand.p90(printed, junctions=True) < cand.p90(cand.as_printed(match))):
+            and _miss(cand, printed) < _miss(cand, cand.as_printed(match))):
         return ribs, alt
     return None
+
+
+def _miss(cand: _Candidates, m: VolumeMatch[Built]) -> float:
+    """The larger of the bare and the twice-covered area fraction of ``m``'s lines on the
+    component (``stripe_joins.coverage_miss``)."""
+    return coverage_miss(cand.comp.vertices, cand.comp.faces, m.result.waypoints)
