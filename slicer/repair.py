@@ -14,7 +14,7 @@ The repair is picked by the refusal's reason (``SurfaceRefused.reason``): an ope
 filled, and where the filled surface is still refused (open sheets, a wall with a hole) it is
 wrapped by fTetWild's winding-number test, which handles open surfaces. A closed,
 non-manifold surface (an assembly's bodies touching along edges or faces, or pushed into
-each other) is split where its parts touch (``winding_repair.separate_shells``) and its
+each other) is split where its parts touch (``shell_split.separate_shells``) and its
 shells joined into one solid by manifold3d (``slicer.shell_union``): exact, in seconds, and
 one boundary, which fTetWild meshes far faster than overlapping shells; where that split
 leaves a crowded edge, the surface is wrapped. A wrap of several shells is joined the same

@@ -75,7 +75,7 @@ class SupervisorNode(PrintLoop, LifecycleNode):
         self.dt = float(p.get("dt", 0.002))
         # The twin's speed-up; the emulated extruder runs on the same clock (ETA, lead, prime).
         self.time_scale = float(p.get("time_scale", 1.0))
-        # the twin's shared clock, which the emulated extruder's flow runs on (read only)
+        # the twin's shared clock, which the emulated extruder's flow runs on (only read here)
         path = p.get("sim_clock") or None
         self.sim_clock = SimClock(self.time_scale, path) if path else None
         self.settle_s = float(p.get("settle_s", 0.05))  # wall s for a switch-on to show
@@ -135,7 +135,7 @@ class SupervisorNode(PrintLoop, LifecycleNode):
         reply = self._request(self.names["robot"], Command.make("status"), 2.0)
         why = str(reply.value("estopped", "")) if reply.ok else ""
         # the extruder's latch as of a state sent after the question (a reset just
-        # confirmed shows in the next state, 10 ms later)
+        # confirmed shows in the next state, at most an idle period later)
         end = time.monotonic() + 0.5
         while (self.extruder_state is not None and self.extruder_state.t < asked
                and time.monotonic() < end):
