@@ -209,12 +209,7 @@ class LineSource:
         stripes are stubs joined by U-turn connectors, which then lay half the ink, and the
         volume match spreads the stripes of the wide part apart to make up for it (the
         aorta's plaque junction: two tube walls and the bridge between them)."""
-        geo, hw = self.geometry, self.wall_half_width
-        reach = geo.reach(hw)
-        wide = clip_lines(stripes, geo.vertices, geo.faces, -reach, -hw)
-        walls = clip_lines(geo.centre_lines(), geo.vertices, geo.faces, reach, hw)
-        ident = np.arange(len(geo.faces))
-        return merge_lines([walls, wide], [ident, ident])
+        return self._wide_and_walls(stripes, self.geometry.centre_lines())
 
     def ribs(self, contours: SurfaceLines) -> SurfaceLines:
         """``contours`` kept where the component is at least 2 x wall_half_width wide, and
@@ -222,10 +217,15 @@ class LineSource:
         about 1.5 W between two holes holds one line, not a ring from each hole (two lines
         a rib's width apart) nor none (the rim's rings only, the ribs' ink laid there;
         the octagonal pocket's honeycomb)."""
+        return self._wide_and_walls(contours, self.centre_lines())
+
+    def _wide_and_walls(self, lines: SurfaceLines, centre: SurfaceLines) -> SurfaceLines:
+        """``lines`` where the component is at least 2 x wall_half_width wide, ``centre``
+        where it is narrower."""
         geo, hw = self.geometry, self.wall_half_width
         reach = geo.reach(hw)
-        wide = clip_lines(contours, geo.vertices, geo.faces, -reach, -hw)
-        walls = clip_lines(self.centre_lines(), geo.vertices, geo.faces, reach, hw)
+        wide = clip_lines(lines, geo.vertices, geo.faces, -reach, -hw)
+        walls = clip_lines(centre, geo.vertices, geo.faces, reach, hw)
         ident = np.arange(len(geo.faces))
         return merge_lines([walls, wide], [ident, ident])
 
