@@ -12,11 +12,7 @@ spread it, which is what places the branch points. Lines are the crests psi = 2 
 extracted face by face from the phases unwrapped with the per-edge jumps. Faces around which
 the jumps add up to a whole period hold a branch point: there the stripe running past is joined
 straight through (the two stripe ends farthest apart) and the stripe that stops simply ends;
-faces where the line field itself is singular emit nothing. The field is solved on the layer
-split at its edge midpoints until the edges are at most half the spacing (``stripe_mesh``;
-a coarser mesh cannot resolve the period: the crests interpolated across faces as wide as a
-stripe lie off the middle of their neighbours), and the lines are put back on the layer's own
-faces (each split face lies in its parent's plane). Stripe ends that converge on a
+faces where the line field itself is singular emit nothing. Stripe ends that converge on a
 longer neighbour are cut back (``stripe_trim``); the Poisson alternative of the paper's
 comparison is ``poisson_stripes``. Measurements behind these choices: docs/benchmarks.md
 ("Moved from docstrings", stripes).
@@ -41,7 +37,6 @@ from slicer.toolpath.isolines import (
     periodic_face_segments,
 )
 from slicer.toolpath.lines import SurfaceLines, empty_lines, merge_lines
-from slicer.toolpath.stripe_mesh import fine_mesh, on_parent
 from slicer.toolpath.stripe_trim import CONVERGE_TRIM, trim_converging
 from slicer.toolpath.surface import (
     check_mesh,
@@ -303,9 +298,6 @@ def per_component(fn: LineFn, vertices: NDArray[np.float64], faces: NDArray[np.i
 def _stripe_lines_one(vertices: NDArray[np.float64], faces: NDArray[np.int64],
                       direction: NDArray[np.float64], spacing: float,
                       join_branches: bool = True, trim: bool = True) -> SurfaceLines:
-    coarse_v, coarse_f = vertices, faces
-    vertices, faces, parent = fine_mesh(vertices, faces, spacing)
-    direction = direction[parent]
     field = stripe_field(vertices, faces, direction, spacing)
     fp = _face_phases(vertices, faces, field.phase, field.z, 2.0 * np.pi / spacing)
     period = 2.0 * np.pi
@@ -328,7 +320,7 @@ def _stripe_lines_one(vertices: NDArray[np.float64], faces: NDArray[np.int64],
             seg = np.concatenate([seg, bseg])
     if len(seg) == 0:
         return empty_lines()
-    lines = on_parent(lines_from_segments(nodes, seg), coarse_v, coarse_f, parent)
+    lines = lines_from_segments(nodes, seg)
     if not trim or CONVERGE_TRIM <= 0:
         return lines
     return trim_converging(lines, spacing, CONVERGE_TRIM)

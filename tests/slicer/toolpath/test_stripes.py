@@ -9,7 +9,6 @@ from core.errors import InputError
 from slicer.toolpath import (
     geodesic,
     poisson_stripes,
-    stripe_mesh,
     stripe_trim,
     stripes,
     surface,
@@ -136,11 +135,7 @@ def test_several_lines_per_triangle_on_a_coarse_mesh() -> None:
     assert lines.n_lines >= 18
 
 
-def test_stripes_running_past_a_branch_point_are_joined(monkeypatch: pytest.MonkeyPatch
-                                                        ) -> None:
-    # on the mesh as given (edges 0.53 spacing): a branch face is also crossed by the
-    # stripe running past (on a finer mesh it is not, and nothing needs joining)
-    monkeypatch.setattr(stripe_mesh, "FINE_LEVELS", 0)
+def test_stripes_running_past_a_branch_point_are_joined() -> None:
     v, f = disc(20.0, 0.8)
     d = geodesic.boundary_distance(v, f)
     direction = surface.stripe_direction(v, f, d)
@@ -178,4 +173,3 @@ def test_radial_stripes_do_not_converge_after_trimming() -> None:
             gap = np.linalg.norm(lines.points[ln == i][:, None] - lines.points[longer][None],
                                  axis=2).min(axis=1)
             assert gap.min() >= stripe_trim.CONVERGE_TRIM * w - 0.6  # point-to-point, edge ~0.8
-
