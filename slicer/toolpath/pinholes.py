@@ -37,7 +37,9 @@ def pinhole_fill(vertices: NDArray[np.float64], faces: NDArray[np.integer],
     f = np.asarray(faces, dtype=np.int64)
     fill: list[NDArray[np.int64]] = []
     for comp in components(f):
-        loops = [lp for lp in boundary_loops(f[comp]) if len(lp) >= 3]
+        # numbered within the component (order kept), so each walk costs its own size
+        ids, local = np.unique(f[comp], return_inverse=True)
+        loops = [ids[lp] for lp in boundary_loops(local.reshape(-1, 3)) if len(lp) >= 3]
         if len(loops) < 2:
             continue
         length = np.array([np.linalg.norm(vertices[lp] - vertices[np.roll(lp, -1)],
